@@ -1,0 +1,44 @@
+# Everything a new machine needs is installed by these targets themselves.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+NAME   ?= hexapod_paper
+FILE   ?=
+
+.PHONY: setup test test-fast scenario bench lint format clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not accuracy"
+
+scenario: $(STAMP)
+ifneq ($(strip $(FILE)),)
+	$(PY) -m scenarios run $(FILE)
+else
+	$(PY) -m scenarios run $(NAME)
+endif
+
+bench: $(STAMP)
+	$(PY) -m bench
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+
+format: $(STAMP)
+	$(PY) -m ruff format .
+	$(PY) -m ruff check --fix .
+
+clean:
+	rm -rf $(VENV) results .pytest_cache .ruff_cache *.egg-info
