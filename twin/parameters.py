@@ -1,0 +1,229 @@
+"""Named geometric parameters of an MJCF model: injection in memory and their screw motions.
+
+A parameter is one scalar deviation from the nominal MJCF, of one of four kinds:
+
+* ``body_pos``: the body's origin moves by ``value * axis``, axis in the *parent* frame;
+* ``body_rot``: the body frame turns by ``value`` about ``axis`` (parent frame) at its origin;
+  several rotations of one body compose as one rotation vector ``w = sum(axis_k v_k)``;
+* ``site_pos``: the site moves by ``value * axis``, axis in its body's frame;
+* ``joint_zero``: an encoder offset, the joint's true value is the commanded one + ``value``.
+
+Values are SI (metres, radians). Injection edits ``body_pos``, ``body_quat``, ``site_pos``,
+``qpos0`` of a copy of the nominal model and calls ``mj_setConst`` (without it, sites compiled
+at a body origin ignore later edits). Each parameter also has a *screw* at the current
+configuration: a world translation ``t``, a world rotation ``w`` about point ``o``, so that a
+point ``p`` carried by it moves by ``t + w x (p - o)`` and its frame turns by ``w``.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from twin.exceptions import ParameterError
+from twin.rotations import quat_from_rotvec, quat_multiply, skew
+
+KINDS = ("body_pos", "body_rot", "site_pos", "joint_zero")
+SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One named scalar deviation from the nominal model."""
+
+    name: str
+    kind: str
+    element: str
+    axis: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ParameterError(f"parameter '{self.name}': kind '{self.kind}' not in {KINDS}")
+        if self.kind != "joint_zero":
+            n = float(np.linalg.norm(self.axis))
+            if not np.isclose(n, 1.0, atol=1e-9):
+                raise ParameterError(
+                    f"parameter '{self.name}': axis {self.axis} is not a unit vector"
+                )
+
+
+class ParameterSet:
+    """An ordered set of parameters bound to one model's element ids."""
+
+    def __init__(self, parameters: Sequence[Parameter], model: mujoco.MjModel) -> None:
+        self.parameters = tuple(parameters)
+        names = [p.name for p in self.parameters]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ParameterError(f"duplicate parameter names: {dup}")
+        self.names: tuple[str, ...] = tuple(names)
+        n = len(self.parameters)
+        self.kind = np.array([KINDS.index(p.kind) for p in self.parameters], dtype=int)
+        self.axis = np.array([p.axis for p in self.parameters], dtype=float).reshape(n, 3)
+        self.element = np.zeros(n, dtype=int)
+        self.body = np.zeros(n, dtype=int)  # body whose subtree the parameter moves
+        self.is_angle = np.zeros(n, dtype=bool)
+        obj = {
+            "body_pos": mujoco.mjtObj.mjOBJ_BODY,
+            "body_rot": mujoco.mjtObj.mjOBJ_BODY,
+            "site_pos": mujoco.mjtObj.mjOBJ_SITE,
+            "joint_zero": mujoco.mjtObj.mjOBJ_JOINT,
+        }
+        for k, p in enumerate(self.parameters):
+            i = mujoco.mj_name2id(model, obj[p.kind], p.element)
+            if i < 0:
+                raise ParameterError(
+                    f"parameter '{p.name}': the model has no {obj[p.kind].name[6:].lower()} "
+                    f"named '{p.element}'"
+                )
+            self.element[k] = i
+            if p.kind == "site_pos":
+                self.body[k] = model.site_bodyid[i]
+            elif p.kind == "joint_zero":
+                jt = int(model.jnt_type[i])
+                if jt not in (HINGE, SLIDE):
+                    raise ParameterError(f"parameter '{p.name}': joint '{p.element}' is not 1-DOF")
+                self.body[k] = model.jnt_bodyid[i]
+                self.is_angle[k] = jt == HINGE
+            else:
+                if i == 0:
+                    raise ParameterError(f"parameter '{p.name}': the world body cannot move")
+                self.body[k] = i
+                self.is_angle[k] = p.kind == "body_rot"
+        # subtree[k, b]: body b is the parameter's body or one of its descendants
+        parent = model.body_parentid
+        self.subtree = np.zeros((n, model.nbody), dtype=bool)
+        for b in range(model.nbody):
+            chain = set()
+            a = b
+            while True:
+                chain.add(a)
+                if a == 0:
+                    break
+                a = parent[a]
+            for k in range(n):
+                self.subtree[k, b] = self.body[k] in chain
+        self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
+
+    def __len__(self) -> int:
+        return len(self.parameters)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise ParameterError(f"unknown parameter '{name}'") from None
+
+    def units(self) -> list[str]:
+        return ["rad" if a else "m" for a in self.is_angle]
+
+    def to_display(self, values: np.ndarray) -> np.ndarray:
+        """SI -> millimetres and degrees, per parameter."""
+        v = np.asarray(values, dtype=float)
+        return np.where(self.is_angle, np.degrees(v), v * 1e3)
+
+    def from_display(self, values: Iterable[float]) -> np.ndarray:
+        """Millimetres and degrees -> SI, per parameter."""
+        v = np.asarray(list(values), dtype=float)
+        return np.where(self.is_angle, np.radians(v), v * 1e-3)
+
+    # ----------------------------------------------------------------- injection
+    def rotation_vectors(self, values: np.ndarray) -> dict[int, np.ndarray]:
+        """Per rotated body, the rotation vector w = sum(axis_k v_k) (parent frame)."""
+        out: dict[int, np.ndarray] = {}
+        for k in np.flatnonzero(self.kind == 1):
+            b = int(self.body[k])
+            out[b] = out.get(b, np.zeros(3)) + self.axis[k] * values[k]
+        return out
+
+    def inject(self, nominal: mujoco.MjModel, values: np.ndarray) -> mujoco.MjModel:
+        """A copy of ``nominal`` with the deviations ``values`` (SI) applied."""
+        values = np.asarray(values, dtype=float)
+        if values.shape != (len(self),):
+            raise ParameterError(f"expected {len(self)} parameter values, got shape {values.shape}")
+        if not np.all(np.isfinite(values)):
+            bad = [self.names[k] for k in np.flatnonzero(~np.isfinite(values))]
+            raise ParameterError(f"non-finite parameter values for {bad}")
+        model = copy.deepcopy(nominal)
+        for k in range(len(self)):
+            kind, i, v = self.kind[k], self.element[k], values[k]
+            if kind == 0:
+                model.body_pos[i] += self.axis[k] * v
+            elif kind == 2:
+                model.site_pos[i] += self.axis[k] * v
+            elif kind == 3:
+                model.qpos0[model.jnt_qposadr[i]] -= v
+        for b, w in self.rotation_vectors(values).items():
+            model.body_quat[b] = quat_multiply(quat_from_rotvec(w), nominal.body_quat[b])
+        mujoco.mj_setConst(model, mujoco.MjData(model))
+        return model
+
+    # ----------------------------------------------------------------- screws
+    def screws(
+        self, model: mujoco.MjModel, data: mujoco.MjData, values: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World translation t (n,3), rotation w (n,3) and pivot o (n,3) of each parameter.
+
+        ``data`` must hold kinematics (``mj_kinematics``) of ``model`` with ``values`` injected.
+        """
+        n = len(self)
+        t = np.zeros((n, 3))
+        w = np.zeros((n, 3))
+        o = np.zeros((n, 3))
+        xmat = data.xmat.reshape(-1, 3, 3)
+        rotvecs = self.rotation_vectors(np.asarray(values, dtype=float))
+        for k in range(n):
+            kind, i = self.kind[k], self.element[k]
+            if kind == 0:
+                t[k] = xmat[model.body_parentid[i]] @ self.axis[k]
+            elif kind == 1:
+                par = model.body_parentid[i]
+                jl = left_jacobian_so3(rotvecs[int(i)])
+                w[k] = xmat[par] @ (jl @ self.axis[k])
+                o[k] = data.xpos[par] + xmat[par] @ model.body_pos[i]
+            elif kind == 2:
+                t[k] = xmat[model.site_bodyid[i]] @ self.axis[k]
+            elif self.is_angle[k]:
+                w[k] = data.xaxis[i]
+                o[k] = data.xanchor[i]
+            else:
+                t[k] = data.xaxis[i]
+        return t, w, o
+
+    def site_derivatives(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        values: np.ndarray,
+        sites: np.ndarray,
+        screws: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Explicit d(site position)/d(param) and d(site rotation)/d(param), each (S, 3, n)."""
+        t, w, o = screws if screws is not None else self.screws(model, data, values)
+        sites = np.asarray(sites, dtype=int)
+        p = data.site_xpos[sites]  # (S,3)
+        affected = self.subtree[:, model.site_bodyid[sites]].T.copy()  # (S,n)
+        site_kind = self.kind == 2
+        affected[:, site_kind] = sites[:, None] == self.element[site_kind][None, :]
+        dp = t[None, :, :] + np.cross(w[None, :, :], p[:, None, :] - o[None, :, :])  # (S,n,3)
+        dp *= affected[:, :, None]
+        dw = w[None, :, :] * affected[:, :, None]
+        return dp.transpose(0, 2, 1), dw.transpose(0, 2, 1)
+
+
+def left_jacobian_so3(w: np.ndarray) -> np.ndarray:
+    """d exp(w) = [J_l(w) dw]x exp(w): the left Jacobian of SO(3)."""
+    theta = float(np.linalg.norm(w))
+    k = skew(w)
+    if theta < 1e-8:
+        return np.eye(3) + 0.5 * k + k @ k / 6.0
+    return (
+        np.eye(3)
+        + (1 - np.cos(theta)) / theta**2 * k
+        + (theta - np.sin(theta)) / theta**3 * (k @ k)
+    )
