@@ -1,0 +1,121 @@
+"""Commanded tool poses inside a machine's workspace: checks, random draws and grids.
+
+A pose is ``[x, y, z, rx, ry, rz]`` (SI; R = Rz Ry Rx). The workspace box comes from the
+MJCF (``workspace_min`` / ``workspace_max``); a pose is reachable when it lies in that box and
+the nominal inverse kinematics keeps every actuator inside its stroke.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twin.exceptions import ClosureError, WorkspaceError
+from twin.kinematics import inverse
+from twin.mechanism import Mechanism
+
+AXES = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def workspace_box(mech: Mechanism) -> tuple[np.ndarray, np.ndarray]:
+    if mech.workspace_min is None or mech.workspace_max is None:
+        raise WorkspaceError(
+            f"model '{mech.name}' declares no workspace (<numeric name='workspace_min'/'max'>)"
+        )
+    return mech.workspace_min, mech.workspace_max
+
+
+def check_pose_in_box(mech: Mechanism, pose: np.ndarray, tol: float = 1e-12) -> None:
+    """Raise WorkspaceError naming the axis when ``pose`` leaves the workspace box."""
+    lo, hi = workspace_box(mech)
+    pose = np.asarray(pose, dtype=float)
+    for k, name in enumerate(AXES):
+        if not lo[k] - tol <= pose[k] <= hi[k] + tol:
+            scale, unit = (1e3, "mm") if k < 3 else (np.degrees(1.0), "deg")
+            raise WorkspaceError(
+                f"pose {name} = {pose[k] * scale:.4g} {unit} is outside the workspace "
+                f"[{lo[k] * scale:.4g}, {hi[k] * scale:.4g}] {unit}"
+            )
+
+
+def commands_for_poses(mech: Mechanism, poses: np.ndarray) -> np.ndarray:
+    """Commands (N, A) for poses (N, 6): box check, IK, stroke check; errors name the pose."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    out = np.empty((len(poses), mech.n_actuators))
+    q = None
+    for i, p in enumerate(poses):
+        try:
+            check_pose_in_box(mech, p)
+            sol = inverse(mech, p, start=q)
+        except (WorkspaceError, ClosureError) as exc:
+            raise type(exc)(f"pose {i}: {exc}") from None
+        out[i] = sol.actuators
+        q = sol.qpos
+    return out
+
+
+def random_poses(
+    mech: Mechanism, n: int, rng: np.random.Generator, max_draws: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` uniform random reachable poses and their nominal commands, by rejection.
+
+    Only about a quarter of the hexapod's box keeps every limb in its stroke, so draws that
+    leave the stroke are rejected; ``max_draws`` (default 50 n) bounds the effort.
+    """
+    lo, hi = workspace_box(mech)
+    max_draws = max_draws or 50 * n
+    poses, cmds = [], []
+    draws = 0
+    while len(poses) < n:
+        if draws >= max_draws:
+            raise WorkspaceError(
+                f"only {len(poses)} of {n} random poses were reachable in {draws} draws"
+            )
+        p = rng.uniform(lo, hi)
+        draws += 1
+        try:
+            sol = inverse(mech, p)
+        except (WorkspaceError, ClosureError):
+            continue
+        poses.append(p)
+        cmds.append(sol.actuators)
+    return np.array(poses), np.array(cmds)
+
+
+def grid_poses(
+    mech: Mechanism,
+    nodes_per_axis: int,
+    orientations_per_node: int,
+    rng: np.random.Generator,
+    margin: float = 0.0,
+    max_draws_per_node: int = 200,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A nodes^3 grid over the position box, each node with random reachable orientations.
+
+    This is the second paper's verification plan (27 nodes x 8 orientations = 216 poses);
+    ``margin`` shrinks the box by that fraction on each side.
+    """
+    lo, hi = workspace_box(mech)
+    span = hi - lo
+    lo_m, hi_m = lo + margin * span, hi - margin * span
+    axes = [np.linspace(lo_m[k], hi_m[k], nodes_per_axis) for k in range(3)]
+    poses, cmds = [], []
+    for x in axes[0]:
+        for y in axes[1]:
+            for z in axes[2]:
+                found, draws = 0, 0
+                while found < orientations_per_node:
+                    if draws >= max_draws_per_node:
+                        raise WorkspaceError(
+                            f"node ({x * 1e3:.1f}, {y * 1e3:.1f}, {z * 1e3:.1f}) mm: only "
+                            f"{found} reachable orientations in {draws} draws"
+                        )
+                    draws += 1
+                    p = np.concatenate([[x, y, z], rng.uniform(lo[3:], hi[3:])])
+                    try:
+                        sol = inverse(mech, p)
+                    except (WorkspaceError, ClosureError):
+                        continue
+                    poses.append(p)
+                    cmds.append(sol.actuators)
+                    found += 1
+    return np.array(poses), np.array(cmds)
