@@ -1,0 +1,106 @@
+"""Levenberg-Marquardt for nonlinear least squares with a caller-supplied Jacobian.
+
+Minimises ``0.5 |r(x)|^2``. Steps are solved on the column-scaled Jacobian (Marquardt's
+scaling: the damping acts on each parameter in proportion to its own curvature), the damping
+follows Nielsen's gain-ratio rule, and a trial point whose evaluation fails (for a closed
+chain: a closure that does not solve) counts as a rejected step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calib.exceptions import ConvergenceError
+
+
+@dataclass(frozen=True)
+class LMOptions:
+    max_iterations: int = 50
+    step_tol: float = 1e-12  # stop when max |dx| (SI) falls below this
+    cost_rtol: float = 1e-14  # or the relative cost decrease below this
+    initial_damping: float = 1e-3
+
+
+@dataclass(frozen=True)
+class LMResult:
+    x: np.ndarray
+    residual: np.ndarray
+    jacobian: np.ndarray  # of the residual at x
+    cost: float
+    iterations: int
+    converged: bool
+    history: list[float] = field(default_factory=list)  # cost after each accepted step
+    message: str = ""
+
+
+ResidualFn = Callable[[np.ndarray], tuple[np.ndarray, Any]]
+JacobianFn = Callable[[np.ndarray, Any], np.ndarray]
+
+
+def levenberg_marquardt(
+    residual: ResidualFn,
+    jacobian: JacobianFn,
+    x0: np.ndarray,
+    options: LMOptions | None = None,
+    recoverable: tuple[type[BaseException], ...] = (),
+) -> LMResult:
+    """Minimise ``|r(x)|^2``; ``residual(x)`` returns (r, state), ``jacobian(x, state)`` dr/dx.
+
+    ``recoverable`` lists exceptions that make a trial step fail instead of the whole solve.
+    """
+    opt = options or LMOptions()
+    x = np.array(x0, dtype=float)
+    r, state = residual(x)
+    cost = 0.5 * float(r @ r)
+    history = [cost]
+    damping, nu = opt.initial_damping, 2.0
+    jac = jacobian(x, state)
+    for it in range(1, opt.max_iterations + 1):
+        scale = np.linalg.norm(jac, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        js = jac / scale
+        a = js.T @ js
+        g = js.T @ r
+        accepted = False
+        while not accepted:
+            try:
+                step_s = np.linalg.solve(a + damping * np.eye(len(x)), -g)
+            except np.linalg.LinAlgError:
+                step_s = np.linalg.lstsq(a + damping * np.eye(len(x)), -g, rcond=None)[0]
+            step = step_s / scale
+            predicted = -(g @ step_s) - 0.5 * step_s @ a @ step_s
+            try:
+                r_new, state_new = residual(x + step)
+                cost_new = 0.5 * float(r_new @ r_new)
+            except recoverable:
+                cost_new, r_new, state_new = np.inf, None, None
+            gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+            if np.isfinite(cost_new) and gain > 0:
+                accepted = True
+                x = x + step
+                r, state = r_new, state_new
+                decrease = cost - cost_new
+                cost = cost_new
+                history.append(cost)
+                damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+                nu = 2.0
+                jac = jacobian(x, state)
+                small_step = np.max(np.abs(step)) < opt.step_tol
+                small_decrease = decrease <= opt.cost_rtol * max(cost, 1e-300)
+                if small_step or small_decrease or cost == 0.0:
+                    return LMResult(x, r, jac, cost, it, True, history, "converged")
+            else:
+                if np.max(np.abs(step)) < opt.step_tol:
+                    return LMResult(x, r, jac, cost, it, True, history, "no further decrease")
+                damping *= nu
+                nu *= 2.0
+                if damping > 1e16:
+                    raise ConvergenceError(
+                        f"Levenberg-Marquardt stalled at iteration {it}: no step decreases "
+                        f"the cost {cost:.4g}"
+                    )
+    return LMResult(x, r, jac, cost, opt.max_iterations, False, history, "iteration limit")
