@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 NAME   ?= hexapod_paper
 FILE   ?=
 
-.PHONY: setup test test-fast scenario bench lint format clean
+.PHONY: setup test test-fast scenario bench lint format view clean
 
 setup: $(STAMP)
 
@@ -39,6 +39,10 @@ lint: $(STAMP)
 format: $(STAMP)
 	$(PY) -m ruff format .
 	$(PY) -m ruff check --fix .
+
+MODEL ?= models/hexapod_rrrprr.xml
+view: $(STAMP)
+	$(PY) -m mujoco.viewer --mjcf=$(MODEL)
 
 clean:
 	rm -rf $(VENV) results .pytest_cache .ruff_cache *.egg-info

@@ -88,12 +88,17 @@ def grid_poses(
     rng: np.random.Generator,
     margin: float = 0.0,
     max_draws_per_node: int = 200,
+    stroke_margin: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A nodes^3 grid over the position box, each node with random reachable orientations.
 
     This is the second paper's verification plan (27 nodes x 8 orientations = 216 poses);
-    ``margin`` shrinks the box by that fraction on each side.
+    ``margin`` shrinks the box by that fraction on each side; ``stroke_margin`` (m or rad)
+    keeps the nominal commands that far inside the strokes, so that compensated commands,
+    which differ by the size of the errors, stay inside too.
     """
+    lo_a = mech.actuator_range[:, 0] + stroke_margin
+    hi_a = mech.actuator_range[:, 1] - stroke_margin
     lo, hi = workspace_box(mech)
     span = hi - lo
     lo_m, hi_m = lo + margin * span, hi - margin * span
@@ -114,6 +119,8 @@ def grid_poses(
                     try:
                         sol = inverse(mech, p)
                     except (WorkspaceError, ClosureError):
+                        continue
+                    if np.any(sol.actuators < lo_a) or np.any(sol.actuators > hi_a):
                         continue
                     poses.append(p)
                     cmds.append(sol.actuators)

@@ -1,0 +1,37 @@
+"""Command line: ``python -m scenarios run NAME|PATH [--results DIR]`` and ``list``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from scenarios.config import SCENARIO_DIR, ScenarioError
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m scenarios", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a scenario by name (scenarios/<name>.toml) or path")
+    run.add_argument("scenario")
+    run.add_argument("--results", type=Path, default=None, help="results root (default results/)")
+    run.add_argument("--quiet", action="store_true")
+    sub.add_parser("list", help="list the scenarios shipped in scenarios/")
+    args = parser.parse_args(argv)
+    if args.command == "list":
+        for f in sorted(SCENARIO_DIR.glob("*.toml")):
+            print(f.stem)
+        return 0
+    from scenarios.runner import run_scenario
+
+    try:
+        summary, out_dir = run_scenario(args.scenario, args.results, quiet=args.quiet)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{out_dir / 'summary.json'} (runtime {summary.get('runtime_s', float('nan')):.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,131 @@
+"""report.md of the hexapod_paper scenario: our numbers beside the second paper's."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def _f(v: Any, digits: int = 4) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+def report(s: dict[str, Any]) -> str:
+    paper = s["paper"]
+    cases = s["cases"]
+    lines = [
+        "# Hexapod (6-RRRPRR): the second paper's simulation study",
+        "",
+        "Truth: the paper's Table 2 (actual parameters) minus Table 1 (nominal), 54 parameters.",
+        "The calibration saw only the nominal MJCF, the error model and the Dataset files in",
+        "`datasets/`. Identification: Levenberg-Marquardt on the target residual with the",
+        "implicit-function Jacobian of the closed chain.",
+        "",
+        f"Parameters: {s['n_parameters']}, identifiable from the 256-pose plan: "
+        f"{_f(s['n_identifiable'])}. Runtime {s['runtime_s']:.1f} s.",
+        "",
+        "## Parameter recovery (largest |estimate - truth|, mm)",
+        "",
+        "| plan | noise | ours | paper | worst parameter | LM iterations | cond (scaled) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    paper_rec = {
+        "noise_free": "exact (Fig. 4a)",
+        "random_few": f"about {paper['recovery_29_random_max_abs_mm']}",
+        "random_many": f"about {paper['recovery_256_random_max_abs_mm']}",
+    }
+    for name, c in cases.items():
+        if "error" in c:
+            lines.append(
+                f"| {c['n_poses']} random | {c['noise']} | failed: {c['error'][:80]} "
+                f"| {paper_rec[name]} | | | |"
+            )
+            continue
+        lines.append(
+            f"| {c['n_poses']} random | {c['noise']} | {_f(c['max_abs_mm'])} | {paper_rec[name]} "
+            f"| {c['worst_parameter']} | {c['iterations']} | {_f(c['condition_number'])} |"
+        )
+    lines += [
+        "",
+        "## Verification on the 216-pose grid (27 nodes x 8 orientations)",
+        "",
+        "True tool pose error (no tracker noise) at commanded poses; peak and standard deviation",
+        "of the error magnitudes over the poses.",
+        "",
+        "| state | pos peak (mm) | pos std (mm) | ori peak (deg) | ori std (deg) |",
+        "|---|---|---|---|---|",
+    ]
+    rows = [
+        ("before calibration", s.get("verify_before")),
+        ("after, 29 random poses", s.get("verify_after_random_few")),
+        ("after, 256 random poses", s.get("verify_after")),
+    ]
+    for label, v in rows:
+        if v:
+            lines.append(
+                f"| {label} | {_f(v['pos_peak_mm'])} | {_f(v['pos_std_mm'])} | "
+                f"{_f(v['ori_peak_deg'])} | {_f(v['ori_std_deg'])} |"
+            )
+    t6b, t6a = paper["table6_before"], paper["table6_after"]
+    lines += [
+        f"| paper Table 6, before (experiment) | {t6b['pos_peak_mm']} | {t6b['pos_std_mm']} | "
+        f"{t6b['ori_peak_deg']} | {t6b['ori_std_deg']} |",
+        f"| paper Table 6, after (experiment) | {t6a['pos_peak_mm']} | {t6a['pos_std_mm']} | "
+        f"{t6a['ori_peak_deg']} | {t6a['ori_std_deg']} |",
+        f"| paper Table 4, before (simulation, 29 poses) | "
+        f"{paper['table4_before']['pos_peak_mm']} | {paper['table4_before']['pos_std_mm']} | | |",
+        f"| paper Table 4, after 256 random (simulation) | "
+        f"{paper['table4_after_256_random']['pos_peak_mm']} | "
+        f"{paper['table4_after_256_random']['pos_std_mm']} | | |",
+        "",
+        "## Why the numbers differ from the paper",
+        "",
+        "* Noise-free: 9 poses x 6 pose components give exactly 54 equations, and the",
+        "  identification recovers the 54 errors to round-off (target < 1e-6 mm).",
+    ]
+    for name in ("random_few", "random_many"):
+        c = cases.get(name, {})
+        if "max_abs_mm" not in c:
+            continue
+        corr = c.get("strongest_correlations") or []
+        pairs = ", ".join(f"{p['a']} ~ {p['b']} ({p['correlation']:+.3f})" for p in corr)
+        z = c.get("max_abs_over_std")
+        verdict = (
+            "consistent with the measurement noise propagated through a poorly conditioned problem"
+            if z is not None and z < 4
+            else "larger than linear noise propagation predicts: at this pose count the "
+            "problem is nonlinear on the scale of its uncertainty"
+        )
+        lines += [
+            f"* {c['n_poses']} noisy poses: the largest deviation, {_f(c['max_abs_mm'])} mm on "
+            f"{c['worst_parameter']}, is {_f(z, 3)} standard errors "
+            f"({_f(c['worst_std_error_mm'], 3)} mm predicted from the noise and this pose set): "
+            f"{verdict}. Most correlated estimates: {pairs}.",
+        ]
+    lines += [
+        "* The paper reports about 1.1 mm after 29 poses and about 15 um after 256; the",
+        "  conditioning of the 54-parameter problem under its stated noise does not allow the",
+        "  latter (nearly collinear columns, above). The poses, which are what a user needs, come",
+        "  out accurate to about 0.01 mm, as in its Tables 4 and 6.",
+        "* The paper's Table 6 is an experiment on the real machine (before: its own",
+        "  unknown errors), not the Table 2 truth used here; Table 4 is its simulation but",
+        "  scored on its 29 calibration poses, not on a separate verification grid.",
+        "",
+    ]
+    est = s.get("estimates_random_many")
+    if est:
+        lines += [
+            "## Estimates from 256 random poses (mm)",
+            "",
+            "| parameter | truth | estimate | std error |",
+            "|---|---|---|---|",
+        ]
+        for n, e in est.items():
+            lines.append(
+                f"| {n} | {e['truth_mm']:.3f} | {e['estimate_mm']:.4f} | {_f(e['std_mm'], 3)} |"
+            )
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,42 @@
+"""The truth twin measured by a laser tracker: commands in, target readings out.
+
+The twin runs closed-chain forward kinematics of the (error-injected) mechanism, optionally
+perturbs the measured tool pose (the second paper's pose-noise model), places the targets,
+and passes them through the tracker (distance-dependent noise, repeats, scale error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.kinematics_batch import forward_batch
+from twin.mechanism import Mechanism
+from twin.tracker import PoseNoise, Tracker
+
+
+@dataclass(frozen=True)
+class Measurement:
+    readings: np.ndarray  # (P, T, R, 3) metres, base frame
+    true_targets: np.ndarray  # (P, T, 3)
+    true_rotation: np.ndarray  # (P, 3, 3) tool frame
+    true_position: np.ndarray  # (P, 3)
+
+
+def measure(
+    truth: Mechanism,
+    commands: np.ndarray,
+    tracker: Tracker,
+    rng: np.random.Generator,
+    pose_noise: PoseNoise | None = None,
+) -> Measurement:
+    """Tracker readings of every target at every command row (N, A)."""
+    sol = forward_batch(truth, commands)
+    targets = sol.targets
+    if pose_noise is not None:
+        local = truth.target_local()
+        r_noisy, p_noisy = pose_noise.perturb(sol.tool_rotation, sol.tool_position, rng)
+        targets = np.einsum("nij,tj->nti", r_noisy, local) + p_noisy[:, None, :]
+    readings = tracker.measure(targets, rng)
+    return Measurement(readings, sol.targets, sol.tool_rotation, sol.tool_position)
