@@ -129,7 +129,9 @@ class Geometry:
             radial = self.w_r0 @ np.array([np.cos(ang), np.sin(ang), 0.0])
             self.a1.append(self.a0 + BASE_RADIUS * radial)
             self.a6.append(self.a44 + PLATFORM_RADIUS * radial)
-        self.ups_lengths = [float(np.linalg.norm(b - a)) for a, b in zip(self.a1, self.a6)]
+        self.ups_lengths = [
+            float(np.linalg.norm(b - a)) for a, b in zip(self.a1, self.a6, strict=True)
+        ]
 
 
 def body(name, pos, rot_parent, rot, joint=None, extra="", children="", indent=4):
@@ -171,40 +173,79 @@ def build_xml() -> str:
         r_j6 = frame_z(np.cross(limb, r_j2[:, 2]), limb)
         ind = 10
         j6 = body(
-            f"limb{n}_j6", [0, 0, 0], r_j5, r_j6,
+            f"limb{n}_j6",
+            [0, 0, 0],
+            r_j5,
+            r_j6,
             f'<joint name="limb{n}_j6" type="hinge" axis="0 0 1"/>',
             extra=f'{" " * (ind + 10)}<site name="limb{n}_end" size="0.01"/>',
             indent=ind + 8,
         )
-        j5 = body(f"limb{n}_j5", [0, 0, 0], r_j4, r_j5,
-                  f'<joint name="limb{n}_j5" type="hinge" axis="0 0 1"/>', children=j6,
-                  indent=ind + 6)
-        j4 = body(f"limb{n}_j4", [0, 0, 0], r_j3, r_j4,
-                  f'<joint name="limb{n}_j4" type="hinge" axis="0 0 1"/>',
-                  extra=f'{" " * (ind + 6)}<geom class="ball" size="0.03"/>', children=j5,
-                  indent=ind + 4)
+        j5 = body(
+            f"limb{n}_j5",
+            [0, 0, 0],
+            r_j4,
+            r_j5,
+            f'<joint name="limb{n}_j5" type="hinge" axis="0 0 1"/>',
+            children=j6,
+            indent=ind + 6,
+        )
+        j4 = body(
+            f"limb{n}_j4",
+            [0, 0, 0],
+            r_j3,
+            r_j4,
+            f'<joint name="limb{n}_j4" type="hinge" axis="0 0 1"/>',
+            extra=f'{" " * (ind + 6)}<geom class="ball" size="0.03"/>',
+            children=j5,
+            indent=ind + 4,
+        )
         j3 = body(
-            f"limb{n}_j3", r_j2.T @ (a6 - a1), r_j2, r_j3,
+            f"limb{n}_j3",
+            r_j2.T @ (a6 - a1),
+            r_j2,
+            r_j3,
             f'<joint name="limb{n}_j3" type="slide" axis="0 0 1" ref="{length:.12g}" '
             f'range="{UPS_STROKE[0]} {UPS_STROKE[1]}"/>',
             extra=f'{" " * (ind + 4)}<geom class="rod" fromto="0 0 -0.55 0 0 0"/>',
-            children=j4, indent=ind + 2,
+            children=j4,
+            indent=ind + 2,
         )
-        j2 = body(f"limb{n}_j2", [0, 0, 0], r_j1, r_j2,
-                  f'<joint name="limb{n}_j2" type="hinge" axis="0 0 1"/>',
-                  extra=f'{" " * (ind + 2)}<geom class="cylinder" fromto="0 0 0 '
-                  f'{fmt(r_j2.T @ limb * 0.6)}"/>',
-                  children=j3, indent=ind)
-        j1 = body(f"limb{n}_j1", [0, 0, 0], r_f0, r_j1,
-                  f'<joint name="limb{n}_j1" type="hinge" axis="0 0 1"/>', children=j2,
-                  indent=ind - 2)
-        f0 = body(f"limb{n}_frame0", w_r0.T @ (a1 - g.a0), w_r0, r_f0,
-                  extra=f'{" " * (ind - 2)}<geom class="ball" size="0.04"/>', children=j1,
-                  indent=ind - 4)
+        j2 = body(
+            f"limb{n}_j2",
+            [0, 0, 0],
+            r_j1,
+            r_j2,
+            f'<joint name="limb{n}_j2" type="hinge" axis="0 0 1"/>',
+            extra=f'{" " * (ind + 2)}<geom class="cylinder" fromto="0 0 0 '
+            f'{fmt(r_j2.T @ limb * 0.6)}"/>',
+            children=j3,
+            indent=ind,
+        )
+        j1 = body(
+            f"limb{n}_j1",
+            [0, 0, 0],
+            r_f0,
+            r_j1,
+            f'<joint name="limb{n}_j1" type="hinge" axis="0 0 1"/>',
+            children=j2,
+            indent=ind - 2,
+        )
+        f0 = body(
+            f"limb{n}_frame0",
+            w_r0.T @ (a1 - g.a0),
+            w_r0,
+            r_f0,
+            extra=f'{" " * (ind - 2)}<geom class="ball" size="0.04"/>',
+            children=j1,
+            indent=ind - 4,
+        )
         ups.append(f0)
         # platform S-joint site with the same frame as limb n's last joint body
         platform_sites.append((n, a6, r_j6))
-        welds.append(f'    <weld name="limb{n}_closure" site1="limb{n}_end" site2="platform_S{n}"/>')
+        welds.append(
+            f'    <weld name="limb{n}_closure" site1="limb{n}_end" site2="platform_S{n}"/>'
+        )
 
     # UP limb + wrist + head
     r_f04 = w_r0
@@ -234,42 +275,93 @@ def build_xml() -> str:
         ]
     )
     head = body("head", [0, 0, 0], r_j64, r_head, extra=head_extra, indent=22)
-    j64 = body("limb4_j6", r_j54.T @ (g.a64 - g.a64), r_j54, r_j64,
-               f'<joint name="limb4_j6" type="hinge" axis="0 0 1" '
-               f'range="{-WRIST_RANGE:.12g} {WRIST_RANGE:.12g}"/>', children=head, indent=20)
-    j54 = body("limb4_j5", r_j44.T @ (g.a64 - g.a44), r_j44, r_j54,
-               f'<joint name="limb4_j5" type="hinge" axis="0 0 1" '
-               f'range="{-WRIST_RANGE:.12g} {WRIST_RANGE:.12g}"/>',
-               extra=f'{" " * 20}<geom class="ball" size="0.05"/>', children=j64, indent=18)
+    j64 = body(
+        "limb4_j6",
+        r_j54.T @ (g.a64 - g.a64),
+        r_j54,
+        r_j64,
+        f'<joint name="limb4_j6" type="hinge" axis="0 0 1" '
+        f'range="{-WRIST_RANGE:.12g} {WRIST_RANGE:.12g}"/>',
+        children=head,
+        indent=20,
+    )
+    j54 = body(
+        "limb4_j5",
+        r_j44.T @ (g.a64 - g.a44),
+        r_j44,
+        r_j54,
+        f'<joint name="limb4_j5" type="hinge" axis="0 0 1" '
+        f'range="{-WRIST_RANGE:.12g} {WRIST_RANGE:.12g}"/>',
+        extra=f'{" " * 20}<geom class="ball" size="0.05"/>',
+        children=j64,
+        indent=18,
+    )
     sites = "\n".join(
         f'{" " * 18}<site name="platform_S{n}" pos="{fmt(r_j34.T @ (a6 - g.a44))}" '
         f'quat="{fmt(quat_wxyz(r_j34.T @ r))}" size="0.012" rgba="0.9 0.5 0.1 1"/>'
         for n, a6, r in platform_sites
     )
-    j44 = body("limb4_j4", [0, 0, 0], r_j34, r_j44,
-               f'<joint name="limb4_j4" type="hinge" axis="0 0 1" '
-               f'range="{-WRIST_RANGE:.12g} {WRIST_RANGE:.12g}"/>',
-               extra=f'{" " * 18}<geom class="wrist" fromto="0 0 0 0 0 {E_WRIST:.12g}"/>',
-               children=j54, indent=16)
+    j44 = body(
+        "limb4_j4",
+        [0, 0, 0],
+        r_j34,
+        r_j44,
+        f'<joint name="limb4_j4" type="hinge" axis="0 0 1" '
+        f'range="{-WRIST_RANGE:.12g} {WRIST_RANGE:.12g}"/>',
+        extra=f'{" " * 18}<geom class="wrist" fromto="0 0 0 0 0 {E_WRIST:.12g}"/>',
+        children=j54,
+        indent=16,
+    )
     platform = body(
-        "limb4_j3", r_j24.T @ (g.a44 - g.a0), r_j24, r_j34,
+        "limb4_j3",
+        r_j24.T @ (g.a44 - g.a0),
+        r_j24,
+        r_j34,
         f'<joint name="limb4_j3" type="slide" axis="0 0 1" ref="{UP_LENGTH_REF:.12g}" '
         f'range="{UP_STROKE[0]} {UP_STROKE[1]}"/>',
         extra=f'{" " * 16}<geom name="platform" class="platform" fromto="0 0 -0.02 0 0 0.02"/>\n'
         f'{" " * 16}<geom class="rod" fromto="0 0 -0.6 0 0 0"/>\n{sites}',
-        children=j44, indent=14,
+        children=j44,
+        indent=14,
     )
-    j24 = body("limb4_j2", [0, 0, 0], r_j14, r_j24,
-               '<joint name="limb4_j2" type="hinge" axis="0 0 1"/>', children=platform, indent=12)
-    j14 = body("limb4_j1", [0, 0, 0], r_f04, r_j14,
-               '<joint name="limb4_j1" type="hinge" axis="0 0 1"/>', children=j24, indent=10)
-    f04 = body("limb4_frame0", [0, 0, 0], w_r0, r_f04,
-               extra=f'{" " * 10}<geom class="ball" size="0.05"/>', children=j14, indent=8)
-    base = body("base", g.a0, eye, w_r0,
-                extra=f'{" " * 8}<geom name="base_plate" type="cylinder" size="0.42 0.02" '
-                f'pos="0 0 -0.06" rgba="0.35 0.35 0.4 1"/>\n'
-                f'{" " * 8}<site name="A0" size="0.015" rgba="1 0 0 1"/>',
-                children="\n".join([f04, *ups]), indent=4)
+    j24 = body(
+        "limb4_j2",
+        [0, 0, 0],
+        r_j14,
+        r_j24,
+        '<joint name="limb4_j2" type="hinge" axis="0 0 1"/>',
+        children=platform,
+        indent=12,
+    )
+    j14 = body(
+        "limb4_j1",
+        [0, 0, 0],
+        r_f04,
+        r_j14,
+        '<joint name="limb4_j1" type="hinge" axis="0 0 1"/>',
+        children=j24,
+        indent=10,
+    )
+    f04 = body(
+        "limb4_frame0",
+        [0, 0, 0],
+        w_r0,
+        r_f04,
+        extra=f'{" " * 10}<geom class="ball" size="0.05"/>',
+        children=j14,
+        indent=8,
+    )
+    base = body(
+        "base",
+        g.a0,
+        eye,
+        w_r0,
+        extra=f'{" " * 8}<geom name="base_plate" type="cylinder" size="0.42 0.02" '
+        f'pos="0 0 -0.06" rgba="0.35 0.35 0.4 1"/>\n'
+        f'{" " * 8}<site name="A0" size="0.015" rgba="1 0 0 1"/>',
+        children="\n".join([f04, *ups]),
+        indent=4,
+    )
     qpos = []
     for length in g.ups_lengths:
         qpos += [0, 0, length, 0, 0, 0]
