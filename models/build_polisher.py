@@ -25,6 +25,10 @@ silent, these choices (each documented in the XML too):
   the 628..1178 mm stroke (with the limbs at mid-stroke, 903 mm, one corner needed 1182 mm);
   the UP limb's passive stroke is 600..1200 mm (it runs 690..1062 mm), the wrist angles
   stay within +-15 deg (their range is +-90 deg);
+* the S joints as three R joints: z4,i parallel to the U joint's second axis z2,i, z5,i
+  normal to it and to the limb, z6,i along the limb (reference pose). The layout matters:
+  with z4,i along the limb instead, the offsets inside an S joint only lengthen the limb,
+  and 44 instead of 51 source-error combinations are identifiable from the paper's plan;
 * the wrist: z4,4 along the UP limb, z5,4 and z6,4 intersecting at A6,4 = A4,4 + e u; at the
   reference pose z5,4 is along y and z6,4 along x of {R} (section 3);
 * the head: A6,4 -> Q 405 mm along -z, Q -> P0 120 mm along +x, P0 -> P 250 mm along -z at
@@ -168,9 +172,12 @@ def build_xml() -> str:
         r_j1 = frame_z(tangent, radial)
         r_j2 = frame_z(np.cross(limb, tangent), tangent)
         r_j3 = frame_z(limb, r_j2[:, 2])
-        r_j4 = frame_z(limb, r_j2[:, 2])
-        r_j5 = frame_z(r_j2[:, 2], limb)
-        r_j6 = frame_z(np.cross(limb, r_j2[:, 2]), limb)
+        # S joint as three R joints: the first parallel to the U joint's second axis, the
+        # last along the limb (with the first along the limb instead, the offsets inside the
+        # S joint only lengthen the limb and the identifiable count drops from 51 to 44)
+        r_j4 = frame_z(r_j2[:, 2], limb)
+        r_j5 = frame_z(np.cross(limb, r_j2[:, 2]), limb)
+        r_j6 = frame_z(limb, r_j2[:, 2])
         ind = 10
         j6 = body(
             f"limb{n}_j6",
@@ -386,6 +393,8 @@ def build_xml() -> str:
      * UP limb {UP_LENGTH_REF * 1e3:.0f} mm at the reference pose, so the UPS limbs measure
        {g.ups_lengths[0] * 1e3:.3f} mm there and 649..1158 mm over the whole task workspace
        (inside 628..1178; at mid-stroke one corner needed 1182 mm);
+     * S joints as three R joints: z4,i parallel to the U joint's second axis, z6,i along the
+       limb (with z4,i along the limb, S-joint offsets only lengthen it: fewer identifiable);
      * wrist: z4,4 along the UP limb; z5,4 (along y) and z6,4 (along x) meet at A6,4;
      * head: A6,4 -> Q along -z, Q -> P0 along +x, P0 -> P along -z at the reference pose;
        gauge targets P1 = P0 + 200 y, P2,3 = P0 + 200 (-+cos30, -sin30, 0): the triangle is
