@@ -46,10 +46,34 @@ class IdentifiabilityReport:
         return "\n".join(lines)
 
 
+ZERO_RTOL = 1e-10  # a column whose norm is below this fraction of the largest has no effect
+
+
 def column_scale(jac: np.ndarray) -> np.ndarray:
     """Euclidean norm of each column (1 for a zero column, which is reported separately)."""
     norms = np.linalg.norm(jac, axis=0)
     return np.where(norms > 0, norms, 1.0)
+
+
+def zero_columns(jac: np.ndarray) -> np.ndarray:
+    """Columns that are zero up to round-off (no effect on the measurements)."""
+    norms = np.linalg.norm(jac, axis=0)
+    top = norms.max() if norms.size else 0.0
+    return norms <= ZERO_RTOL * top if top > 0 else np.ones(norms.shape, dtype=bool)
+
+
+def scaled_jacobian(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Column-scaled copy (unit columns), the scale, and the zero-column mask.
+
+    Columns that are zero up to round-off are set to exactly zero rather than scaled up:
+    scaling them would turn round-off into unit columns of noise.
+    """
+    jac = np.asarray(jac, dtype=float)
+    zero = zero_columns(jac)
+    scale = column_scale(jac)
+    scaled = jac / scale
+    scaled[:, zero] = 0.0
+    return scaled, scale, zero
 
 
 def pivoted_qr_order(a: np.ndarray, rank: int) -> list[int]:
@@ -83,11 +107,7 @@ def analyse(jac: np.ndarray, names: tuple[str, ...] | list[str]) -> Identifiabil
     m, n = jac.shape
     if n != len(names):
         raise ValueError(f"Jacobian has {n} columns but {len(names)} names were given")
-    raw_norms = np.linalg.norm(jac, axis=0)
-    scale = column_scale(jac)
-    scaled = jac / scale
-    zero = raw_norms <= 1e-12 * max(raw_norms.max(), 1e-300)
-    scaled[:, zero] = 0.0
+    scaled, _, zero = scaled_jacobian(jac)
     s = np.linalg.svd(scaled, compute_uv=False)
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
     order = pivoted_qr_order(scaled, rank)

@@ -15,9 +15,20 @@ ReportFn = Callable[[dict[str, Any]], str]
 
 
 def _studies() -> dict[str, tuple[StudyFn, ReportFn]]:
-    from scenarios import hexapod_paper, hexapod_report
+    from scenarios import (
+        hexapod_paper,
+        hexapod_report,
+        polisher_identifiability,
+        polisher_identifiability_report,
+    )
 
-    return {"hexapod_paper": (hexapod_paper.run, hexapod_report.report)}
+    return {
+        "hexapod_paper": (hexapod_paper.run, hexapod_report.report),
+        "polisher_identifiability": (
+            polisher_identifiability.run,
+            polisher_identifiability_report.report,
+        ),
+    }
 
 
 def run_scenario(

@@ -126,3 +126,18 @@ def grid_poses(
                     cmds.append(sol.actuators)
                     found += 1
     return np.array(poses), np.array(cmds)
+
+
+def layer_poses(
+    mech: Mechanism, heights: list[float], nodes_per_side: int, half_width: tuple[float, float]
+) -> np.ndarray:
+    """Pure-translation nodes: ``nodes_per_side``^2 evenly spaced nodes in each layer.
+
+    The first paper's calibration plan: layers parallel to xy at ``heights`` (m), nodes over
+    [-half_width, +half_width] in x and y, the tool orientation fixed at zero.
+    """
+    if nodes_per_side < 1:
+        raise WorkspaceError(f"a layer needs at least one node per side, got {nodes_per_side}")
+    xs = np.linspace(-half_width[0], half_width[0], nodes_per_side) if nodes_per_side > 1 else [0.0]
+    ys = np.linspace(-half_width[1], half_width[1], nodes_per_side) if nodes_per_side > 1 else [0.0]
+    return np.array([[x, y, z, 0.0, 0.0, 0.0] for z in heights for x in xs for y in ys])

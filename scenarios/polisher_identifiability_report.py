@@ -1,0 +1,61 @@
+"""report.md of the polisher_identifiability scenario."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def report(s: dict[str, Any]) -> str:
+    paper = s["paper_table2_per_limb"]
+    ours = s["identifiable_per_limb"]
+    lines = [
+        "# Hybrid polisher: source errors and their identifiability",
+        "",
+        f"Plan: {s['n_poses']} poses (pure translation, layers x nodes as in the scenario file),"
+        f" {s['n_equations']} equations from three gauge targets.",
+        "",
+        "| quantity | ours | paper |",
+        "|---|---|---|",
+        f"| source errors (Appendix A) | {s['n_source_errors']} | {s['paper_source_errors']} |",
+        f"| identifiable (Steps 1-3, H_xi first) | {s['n_identifiable']} | {paper['total']} |",
+        f"| rank by spectral decomposition | {s['rank_spectral']} | |",
+        f"| rank by pivoted QR | {s['rank_pivoted_qr']} | |",
+    ]
+    for limb, n in ours.items():
+        lines.append(f"| of which {limb} | {n} | {paper.get(limb, '')} |")
+    lines += [
+        f"| limbs 2 and 3 alike | {s['limbs_2_and_3_alike']} | yes |",
+        f"| condition number (scaled, Steps 1-3 set) | {s['condition_number']:.4g} | |",
+        "",
+        "## Cross-checks",
+        "",
+        f"* screw-theory H against the twin's implicit-function H: max relative difference "
+        f"{s['screw_vs_twin_max_rel_err']:.2e};",
+        f"* twin H against finite differences of the full nonlinear forward kinematics: "
+        f"{s['jacobian_fd_max_rel_err']:.2e}.",
+        "",
+        "## Why the counts differ from the paper",
+        "",
+        "* Source errors: Appendix A's rule (6 for each limb's base frame, 5 for every 1-DOF",
+        "  joint frame, one offset per actuated joint) gives 4 x 6 + (3 x 6 + 6) x 5 + 6 = 150",
+        "  for three UPS limbs (U, P, S = 6 joints), the UP limb (3 joints) and the wrist (3).",
+        "  The paper states 145 without listing them; 5 fewer would mean one joint frame",
+        "  fewer, which its text does not say.",
+        "* Identifiable: a UPS limb acts on the platform only through its actuation wrench, a",
+        "  force along the limb; errors whose twist is reciprocal to that force (rotations",
+        "  about axes through A1,i or A6,i, translations normal to the limb) have no effect",
+        f"  ({len(s['no_effect'])} such columns here). What remains per limb depends on how the",
+        "  U and S joints' axes are laid out, which the paper's missing Fig. 2 shows and its",
+        "  text does not: with the S joint's first axis along the limb, its internal offsets",
+        "  only lengthen the limb and 44 combinations are identifiable; with it normal to the",
+        "  limb (our model), 51. The paper's Table 2 also lists dz_3,i for the P joint,",
+        "  which Appendix A excludes (the P joint's own axis), so its frames are numbered",
+        "  differently from its appendix. Both our H agree to round-off, so the count is a",
+        "  property of the model, not of the computation.",
+        "",
+        "## Identifiable set (Steps 1-3)",
+        "",
+        ", ".join(s["identifiable"]),
+        "",
+    ]
+    return "\n".join(lines)
