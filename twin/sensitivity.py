@@ -24,19 +24,15 @@ from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
 
 
-def target_jacobian(
-    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray
-) -> np.ndarray:
-    """d(target positions)/d(parameters), (T*3, n), at a closed configuration ``qpos``.
-
-    ``mech`` must carry the model with ``values`` injected; rows are target-major
-    (target 0 x, y, z, target 1 x, ...), matching ``targets.reshape(-1)``.
-    """
+def _implicit(
+    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, sites: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """dq_free/dpi and the explicit site derivatives (dp, dw) of ``sites``, at ``qpos``."""
     update_kinematics(mech, qpos)
     a, b = closure_sites(mech)
-    sites = np.concatenate([a, b, mech.target_sites])
+    all_sites = np.concatenate([a, b, sites])
     screws = params.screws(mech.model, mech.data, values)
-    dp, dw = params.site_derivatives(mech.model, mech.data, values, sites, screws)
+    dp, dw = params.site_derivatives(mech.model, mech.data, values, all_sites, screws)
     nc = len(a)
     c_pi = stack_closure_rows(mech, dp[:nc] - dp[nc : 2 * nc], dw[:nc] - dw[nc : 2 * nc])
     free = mech.free_dofs()
@@ -45,6 +41,31 @@ def target_jacobian(
         dq = np.linalg.solve(c_q, -c_pi)
     else:
         dq = np.linalg.lstsq(c_q, -c_pi, rcond=None)[0]
+    return dq, free, dp[2 * nc :], dw[2 * nc :]
+
+
+def target_jacobian(
+    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray
+) -> np.ndarray:
+    """d(target positions)/d(parameters), (T*3, n), at a closed configuration ``qpos``.
+
+    ``mech`` must carry the model with ``values`` injected; rows are target-major
+    (target 0 x, y, z, target 1 x, ...), matching ``targets.reshape(-1)``.
+    """
+    dq, free, dp, _ = _implicit(mech, params, values, qpos, mech.target_sites)
     jp, _ = site_jacobians(mech, mech.target_sites)
     y_q = jp[:, :, free].reshape(-1, len(free))
-    return y_q @ dq + dp[2 * nc :].reshape(-1, len(params))
+    return y_q @ dq + dp.reshape(-1, len(params))
+
+
+def tool_twist_jacobian(
+    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray
+) -> np.ndarray:
+    """d(tool pose error twist)/d(parameters), (6, n): linear velocity of the tool point and
+    angular velocity, world axes (the first paper's B of Eq. 7, from the twin)."""
+    sites = np.array([mech.tool_site])
+    dq, free, dp, dw = _implicit(mech, params, values, qpos, sites)
+    jp, jr = site_jacobians(mech, sites)
+    lin = jp[0][:, free] @ dq + dp[0]
+    ang = jr[0][:, free] @ dq + dw[0]
+    return np.vstack([lin, ang])
