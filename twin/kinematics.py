@@ -120,8 +120,9 @@ def check_commands(mech: Mechanism, commands: np.ndarray) -> np.ndarray:
     bad = np.flatnonzero((c < lo - 1e-12) | (c > hi + 1e-12))
     if bad.size:
         k = int(bad[0])
+        what = "stroke" if mech.actuator_is_slide[k] else "range"
         raise WorkspaceError(
-            f"actuator '{mech.actuator_names[k]}' command {c[k]:.6g} is outside its stroke "
+            f"actuator '{mech.actuator_names[k]}' command {c[k]:.6g} is outside its {what} "
             f"[{lo[k]:.6g}, {hi[k]:.6g}]"
         )
     return c
