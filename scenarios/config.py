@@ -32,6 +32,8 @@ class Scenario:
         """A path from the file: relative to the scenario's folder, else the repo root."""
         p = Path(relative)
         if p.is_absolute():
+            if not p.exists():
+                raise ScenarioError(f"{self.path}: file '{relative}' not found")
             return p
         for base in (self.path.parent, REPO_ROOT):
             if (base / p).exists():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -14,21 +15,23 @@ StudyFn = Callable[[Scenario, Path, Progress], dict[str, Any]]
 ReportFn = Callable[[dict[str, Any]], str]
 
 
-def _studies() -> dict[str, tuple[StudyFn, ReportFn]]:
-    from scenarios import (
-        hexapod_paper,
-        hexapod_report,
-        polisher_identifiability,
-        polisher_identifiability_report,
-    )
+# study name -> (module with run(scenario, out_dir, progress), module with report(summary))
+STUDIES = {
+    "hexapod_paper": ("scenarios.hexapod_paper", "scenarios.hexapod_report"),
+    "polisher_identifiability": (
+        "scenarios.polisher_identifiability",
+        "scenarios.polisher_identifiability_report",
+    ),
+    "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
+}
 
-    return {
-        "hexapod_paper": (hexapod_paper.run, hexapod_report.report),
-        "polisher_identifiability": (
-            polisher_identifiability.run,
-            polisher_identifiability_report.report,
-        ),
-    }
+
+def _study(name: str) -> tuple[StudyFn, ReportFn]:
+    run_module, report_module = STUDIES[name]
+    return (
+        importlib.import_module(run_module).run,
+        importlib.import_module(report_module).report,
+    )
 
 
 def run_scenario(
@@ -36,12 +39,11 @@ def run_scenario(
 ) -> tuple[dict[str, Any], Path]:
     """Run one scenario; returns its summary and its output folder."""
     scenario = load_scenario(name_or_path)
-    studies = _studies()
-    if scenario.study not in studies:
+    if scenario.study not in STUDIES:
         raise ScenarioError(
-            f"{scenario.path}: unknown study '{scenario.study}'; known: {sorted(studies)}"
+            f"{scenario.path}: unknown study '{scenario.study}'; known: {sorted(STUDIES)}"
         )
-    run, report = studies[scenario.study]
+    run, report = _study(scenario.study)
     out_dir = (results_root or REPO_ROOT / "results") / scenario.name
     out_dir.mkdir(parents=True, exist_ok=True)
     progress = Progress(scenario.name, quiet=quiet)

@@ -1,0 +1,94 @@
+"""The hexapod_paper scenario end to end, and the scenario files' error handling."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from calib.dataset import read_dataset
+from scenarios.__main__ import main as cli
+from scenarios.config import ScenarioError, load_scenario
+from scenarios.runner import run_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def hexapod_run(tmp_path_factory):
+    results = tmp_path_factory.mktemp("results")
+    summary, out_dir = run_scenario("hexapod_paper", results, quiet=True)
+    return summary, out_dir
+
+
+@pytest.mark.accuracy
+def test_summary_keys_and_gates(hexapod_run):
+    _summary, out_dir = hexapod_run
+    on_disk = json.loads((out_dir / "summary.json").read_text())
+    assert on_disk["n_parameters"] == 54
+    assert on_disk["n_identifiable"] == 54
+    # noise-free: the 54 errors of the second paper's Table 2 recovered exactly
+    assert on_disk["recovery_noise_free_max_abs_mm"] < 1e-6
+    # with noise, more poses recover the parameters better
+    assert on_disk["recovery_256_random_max_abs_mm"] < on_disk["recovery_29_random_max_abs_mm"]
+    before, after = on_disk["verify_before"], on_disk["verify_after"]
+    for key in ("pos_peak_mm", "pos_std_mm", "ori_peak_deg", "ori_std_deg"):
+        assert key in before and key in after
+    # compensation: the verification error drops by more than an order of magnitude, to the
+    # order of the paper's experiment after calibration (Table 6: 0.012 mm, 0.0051 deg)
+    assert after["pos_peak_mm"] < before["pos_peak_mm"] / 10
+    assert after["pos_peak_mm"] < 0.05
+    assert after["ori_peak_deg"] < 0.02
+    assert on_disk["n_verification_poses"] == 216
+    assert on_disk["runtime_s"] > 0
+    assert (out_dir / "report.md").read_text().startswith("# Hexapod")
+
+
+@pytest.mark.accuracy
+def test_calibration_read_the_dataset_files(hexapod_run):
+    _, out_dir = hexapod_run
+    ds = read_dataset(out_dir / "datasets" / "random_many.csv", expected_model="hexapod_rrrprr")
+    assert ds.n_poses == 256 and ds.n_targets == 3
+    assert ds.actuator_names == tuple(f"leg{i}" for i in range(1, 7))
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    return p
+
+
+def test_unknown_scenario_name():
+    with pytest.raises(ScenarioError, match=r"no scenario named 'nope'.*hexapod_paper"):
+        load_scenario("nope")
+
+
+def test_scenario_errors_name_the_cause(tmp_path):
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load_scenario(str(_write(tmp_path, "name = [")))
+    with pytest.raises(ScenarioError, match="missing 'study'"):
+        load_scenario(str(_write(tmp_path, 'name = "x"')))
+    p = _write(tmp_path, 'name = "x"\nstudy = "nonexistent"')
+    with pytest.raises(ScenarioError, match="unknown study 'nonexistent'"):
+        run_scenario(str(p), tmp_path, quiet=True)
+    text = (
+        (ROOT / "scenarios/hexapod_paper.toml")
+        .read_text()
+        .replace('values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/')
+    )
+    p = _write(tmp_path, text.replace("seed = 2019", 'seed = "abc"'))
+    with pytest.raises(ScenarioError, match="'seed' must be int"):
+        run_scenario(str(p), tmp_path, quiet=True)
+    missing = text.replace("many_poses = 256\n", "")
+    p = _write(tmp_path, missing)
+    with pytest.raises(ScenarioError, match=r"missing key 'plans.many_poses'"):
+        run_scenario(str(p), tmp_path, quiet=True)
+    p = _write(tmp_path, text.replace("hexapod_table2.toml", "no_such_file.toml"))
+    with pytest.raises(ScenarioError, match=r"'.*no_such_file.toml' not found"):
+        run_scenario(str(p), tmp_path, quiet=True)
+
+
+def test_cli_reports_scenario_errors(capsys):
+    assert cli(["run", "nope"]) == 2
+    assert "no scenario named" in capsys.readouterr().err
