@@ -31,6 +31,7 @@ class CalibrationModel:
         self.params = params
         self._cache_key: bytes | None = None
         self._cache_mech: Mechanism | None = None
+        self._warm: tuple[bytes, np.ndarray] | None = None
 
     @property
     def n_parameters(self) -> int:
@@ -48,7 +49,13 @@ class CalibrationModel:
         return self._cache_mech
 
     def predict(self, values: np.ndarray, commands: np.ndarray) -> Prediction:
-        sol = forward_batch(self.mechanism(values), commands)
+        """Targets at ``commands`` for parameter ``values``. Solving the same commands again
+        (as an estimator does for nearby values) starts from the previous solution."""
+        commands = np.asarray(commands, dtype=float)
+        key = commands.tobytes()
+        start = self._warm[1] if self._warm is not None and self._warm[0] == key else None
+        sol = forward_batch(self.mechanism(values), commands, start=start)
+        self._warm = (key, sol.qpos)
         return Prediction(targets=sol.targets, qpos=sol.qpos)
 
     def jacobian(self, values: np.ndarray, prediction: Prediction) -> np.ndarray:

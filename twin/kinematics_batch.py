@@ -70,8 +70,10 @@ def _residual(mech: Mechanism, xpos: np.ndarray, xmat: np.ndarray) -> np.ndarray
 class _DofAxes:
     """Per-dof motion axes of a model, for Jacobians computed in numpy from frames."""
 
-    def __init__(self, model: mujoco.MjModel, sites: np.ndarray) -> None:
+    def __init__(self, model: mujoco.MjModel, sites: np.ndarray, free: np.ndarray) -> None:
         nv = model.nv
+        free_mask = np.zeros(nv, dtype=bool)
+        free_mask[free] = True
         self.joint = model.dof_jntid.copy()
         self.body = model.dof_bodyid.copy()
         self.kind = np.zeros(nv, dtype=int)  # 0 axis from xaxis, 1 world unit, 2 body column
@@ -99,7 +101,7 @@ class _DofAxes:
                     break
                 b = int(parent[b])
             self.mask[i] = np.isin(self.body, list(chain))
-        self.pairs = np.nonzero(self.mask)
+        self.pairs = np.nonzero(self.mask & free_mask[None, :])
         self.scatter: list | None = None
 
     def closure_jacobian(
@@ -130,14 +132,19 @@ class _DofAxes:
         rot_pair = self.is_rot[dof]
         lin = axes.copy()
         lever = p[:, site[rot_pair]] - xanchor[:, joint[rot_pair]]
-        lin[:, rot_pair] = np.cross(axes[:, rot_pair], lever)
+        lin[:, rot_pair] = _cross(axes[:, rot_pair], lever)
         if self.scatter is None:
             self.scatter = _scatter_plan(mech, site, dof, rot_pair, free)
-        out = np.zeros((n, mech.n_closure, len(free)))
-        for rows, cols, pick, sign, use_rot in self.scatter:
+        out = np.zeros((n, mech.n_closure * len(free)))
+        for flat, pick, sign, use_rot in self.scatter:
             vals = (axes if use_rot else lin)[:, pick]  # (N, k, 3)
-            out[:, rows, cols] += sign * vals.reshape(n, -1)
-        return out
+            out[:, flat] += sign * vals.reshape(n, -1)
+        return out.reshape(n, mech.n_closure, len(free))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (cheaper than np.cross on small batched arrays)."""
+    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
 
 
 def _scatter_plan(mech, site, dof, rot_pair, free):
@@ -162,7 +169,8 @@ def _scatter_plan(mech, site, dof, rot_pair, free):
                 cols += [free_index[d]] * 3
                 pick.append(k)
             if pick:
-                plan.append((np.array(rows), np.array(cols), np.array(pick), sign, use_rot))
+                flat = np.array(rows) * len(free) + np.array(cols)
+                plan.append((flat, np.array(pick), sign, use_rot))
     return plan
 
 
@@ -189,7 +197,11 @@ def forward_batch(
     nthread: int = 0,
     start: np.ndarray | None = None,
 ) -> BatchSolution:
-    """Forward kinematics for commands (N, A) (SI); raises ClosureError naming failed poses."""
+    """Forward kinematics for commands (N, A) (SI); raises ClosureError naming failed poses.
+
+    ``start``: one configuration (nq,) or one per pose (N, nq), e.g. the previous solution
+    when the same poses are solved again for slightly different parameters.
+    """
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
     if commands.shape[1:] != (mech.n_actuators,):
         raise ClosureError(f"commands must be (N, {mech.n_actuators}), got {commands.shape}")
@@ -206,7 +218,9 @@ def forward_batch(
     m = mech.model
     a, b = closure_sites(mech)
     q0 = np.asarray(mech.home_qpos if start is None else start, dtype=float)
-    qpos = np.tile(q0, (n, 1))
+    if q0.ndim == 2 and q0.shape != (n, m.nq):
+        raise ClosureError(f"start must be ({m.nq},) or ({n}, {m.nq}), got {q0.shape}")
+    qpos = np.array(np.broadcast_to(q0, (n, m.nq)))
     qpos[:, mech.actuator_qpos] = commands
     residual = np.full(n, np.inf)
     shapes = {
@@ -216,17 +230,17 @@ def forward_batch(
         "xanchor": (m.njnt, 3),
         "xmat": (m.nbody, 9),
     }
-    frames = {f: np.zeros((n, *shapes[f])) for f in FIELDS}
+    frames = {f: np.zeros((n, *shapes[f])) for f in ("site_xpos", "site_xmat")}
     chunks = [slice(i, min(n, i + CHUNK)) for i in range(0, n, CHUNK)]
     workers = max(1, min(len(chunks), nthread if nthread > 0 else (os.cpu_count() or 1)))
 
     def work(k: int) -> int:
         batch = Batch(m, nsim=min(n, CHUNK), nthread=1)
         bound = {f: batch.bind(f) for f in ("qpos", *FIELDS)}
-        axes = _DofAxes(m, np.concatenate([a, b]))
+        axes = _DofAxes(m, np.concatenate([a, b]), mech.free_dofs())
         its = 0
         for sl in chunks[k::workers]:
-            chunk = {f: frames[f][sl] for f in FIELDS}
+            chunk = {f: frames[f][sl] for f in frames}
             its = max(its, _solve_chunk(mech, batch, bound, axes, qpos[sl], residual[sl], chunk))
         return its
 
@@ -261,7 +275,7 @@ def _solve_chunk(
     residual: np.ndarray,
     frames: dict,
 ) -> int:
-    """Newton on one chunk, in place on qpos, residual and frames (views of the caller's)."""
+    """Newton on one chunk, in place on qpos, residual and the output frames (views)."""
     m = mech.model
     n = len(qpos)
     free = mech.free_dofs()
@@ -272,9 +286,7 @@ def _solve_chunk(
     for it in range(MAX_ITER + 1):
         bound["qpos"][active] = qpos[active]
         batch.forward(ids=active, stage=mujoco.mjtStage.mjSTAGE_POS)
-        for f in FIELDS:
-            frames[f][active] = bound[f][active]
-        r = _residual(mech, frames["site_xpos"][active], frames["site_xmat"][active])
+        r = _residual(mech, bound["site_xpos"][active], bound["site_xmat"][active])
         err = np.max(np.abs(r), axis=1)
         residual[active] = err
         stall[active] = np.where(err >= 0.5 * best[active], stall[active] + 1, 0)
@@ -285,7 +297,7 @@ def _solve_chunk(
         if not np.any(keep) or it == MAX_ITER:
             break
         ids = active[keep]
-        jac = _jacobian(mech, axes, frames, ids)
+        jac = _jacobian(mech, axes, bound, ids)
         rhs = -r[keep][:, :, None]
         if jac.shape[1] != jac.shape[2]:  # not square: least squares by normal equations
             rhs = np.swapaxes(jac, 1, 2) @ rhs
@@ -297,4 +309,7 @@ def _solve_chunk(
         dq[:, free] = step
         qpos[ids] = integrate_positions(m, qpos[ids], dq)
         active = ids
+    # a simulation left out of later calls keeps the frames of its last (converged) call
+    for f in ("site_xpos", "site_xmat"):
+        frames[f][:] = bound[f][:n]
     return it
