@@ -11,6 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from calib.model import CalibrationModel
+from twin.kinematics import inverse
+from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
+from twin.sensitivity import tool_twist_jacobian
 from twin.workspace import commands_for_poses
 
 
@@ -19,3 +22,28 @@ def compensated_commands(
 ) -> np.ndarray:
     """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected."""
     return commands_for_poses(model.mechanism(values), poses)
+
+
+def twist_compensated_commands(
+    model: CalibrationModel,
+    base_values: np.ndarray,
+    delta: np.ndarray,
+    columns: np.ndarray,
+    poses: np.ndarray,
+) -> np.ndarray:
+    """The first paper's Eq. (16): each commanded pose is corrected by the predicted pose
+    error twist ``B delta`` and turned into commands by the controller's inverse kinematics
+    (nominal geometry with the coarse encoder settings ``base_values``)."""
+    mech = model.mechanism(base_values)
+    out = np.empty((len(poses), mech.n_actuators))
+    q = None
+    for i, pose in enumerate(np.atleast_2d(poses)):
+        sol = inverse(mech, pose, start=q)
+        b = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)[:, columns]
+        twist = b @ delta
+        r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
+        corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
+        fixed = inverse(mech, corrected, start=sol.qpos)
+        out[i] = fixed.actuators
+        q = sol.qpos
+    return out

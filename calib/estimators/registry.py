@@ -1,0 +1,25 @@
+"""Estimators by name, for scenario files: "ols", "liu", "ridge", "pcr"."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from calib.estimators.linear import Estimator
+from calib.estimators.liu import Liu
+from calib.estimators.ols import OLS
+from calib.estimators.pcr import PCR
+from calib.estimators.ridge import Ridge
+
+ESTIMATORS: dict[str, Callable[..., Estimator]] = {
+    "ols": OLS,
+    "liu": Liu,
+    "ridge": Ridge,
+    "pcr": PCR,
+}
+
+
+def make_estimator(name: str, **options: Any) -> Estimator:
+    if name not in ESTIMATORS:
+        raise ValueError(f"unknown estimator '{name}'; known: {sorted(ESTIMATORS)}")
+    return ESTIMATORS[name](**options)
