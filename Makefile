@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
-NAME   ?= hexapod_paper
+NAME   ?= liu_vs_ols
 FILE   ?=
 
 .PHONY: setup test test-fast scenario bench lint format view clean
