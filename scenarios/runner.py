@@ -23,6 +23,7 @@ STUDIES = {
         "scenarios.polisher_identifiability_report",
     ),
     "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
+    "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
 }
 
 

@@ -141,3 +141,41 @@ def layer_poses(
     xs = np.linspace(-half_width[0], half_width[0], nodes_per_side) if nodes_per_side > 1 else [0.0]
     ys = np.linspace(-half_width[1], half_width[1], nodes_per_side) if nodes_per_side > 1 else [0.0]
     return np.array([[x, y, z, 0.0, 0.0, 0.0] for z in heights for x in xs for y in ys])
+
+
+def boundary_poses(mech: Mechanism, tol: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """The 2^6 extremes of the workspace box, each pulled back to the reachable boundary.
+
+    For every corner of the box (all combinations of min/max on the six axes) the pose is
+    searched on the segment from the box centre to that corner: the farthest pose along it
+    whose nominal inverse kinematics keeps every actuator in its stroke (bisection to ``tol``
+    of the segment). Returns the poses (64, 6), their commands, and nothing is silently
+    dropped: a corner whose whole segment is unreachable raises.
+    """
+    import itertools
+
+    lo, hi = workspace_box(mech)
+    centre = 0.5 * (lo + hi)
+    poses, cmds = [], []
+    for bits in itertools.product((0, 1), repeat=6):
+        corner = np.where(np.array(bits) == 1, hi, lo)
+        best = None
+        a, b = 0.0, 1.0
+        try:
+            best = (0.0, inverse(mech, centre).actuators)
+        except (WorkspaceError, ClosureError) as exc:
+            raise WorkspaceError(f"the workspace centre is not reachable: {exc}") from None
+        try:
+            best = (1.0, inverse(mech, corner).actuators)
+        except (WorkspaceError, ClosureError):
+            while b - a > tol:
+                t = 0.5 * (a + b)
+                try:
+                    best = (t, inverse(mech, centre + t * (corner - centre)).actuators)
+                    a = t
+                except (WorkspaceError, ClosureError):
+                    b = t
+        t, c = best
+        poses.append(centre + t * (corner - centre))
+        cmds.append(c)
+    return np.array(poses), np.array(cmds)

@@ -1,0 +1,126 @@
+"""Measurement design: which poses to measure, and how many.
+
+Every method works on per-pose blocks of the identification Jacobian (rows of one pose) and an
+observability index of their stack (calib.observability, column-scaled):
+
+* ``greedy``: the second paper's one-by-one algorithm (its Fig. 9): from a starting set, add
+  the candidate that most improves the index, one pose at a time, up to a count;
+* ``paper_selection``: that greedy run from many random starting sets, keeping the best;
+* ``exchange``: a DETMAX-style exchange (Mitchell 1974) at a fixed count: swap a selected pose
+  for a candidate whenever the swap improves the index, until no swap does.
+Ties are broken by the lower candidate index, so results are deterministic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from calib.exceptions import IdentifiabilityError
+from calib.observability import better, observability
+
+
+@dataclass(frozen=True)
+class Selection:
+    indices: list[int]  # selected candidates, in the order they were added
+    index_by_count: list[float]  # index after each addition (count = len(start) + k)
+    start_count: int
+    index_name: str
+
+    @property
+    def final(self) -> float:
+        return self.index_by_count[-1]
+
+
+def _value(blocks: list[np.ndarray], chosen: list[int], name: str) -> float:
+    return observability(np.vstack([blocks[i] for i in chosen]), name, allow_deficient=True)
+
+
+def greedy(
+    blocks: list[np.ndarray], start: list[int], until: int, name: str = "condition"
+) -> Selection:
+    """Add, one at a time, the candidate whose addition gives the best index."""
+    if until > len(blocks):
+        raise IdentifiabilityError(
+            f"asked for {until} poses from {len(blocks)} candidates: too few candidates"
+        )
+    chosen = list(start)
+    curve = [_value(blocks, chosen, name)]
+    while len(chosen) < until:
+        best_i, best_v = -1, None
+        for i in range(len(blocks)):
+            if i in chosen:
+                continue
+            v = _value(blocks, [*chosen, i], name)
+            if best_v is None or better(name, v, best_v):
+                best_i, best_v = i, v
+        chosen.append(best_i)
+        curve.append(float(best_v))
+    return Selection(chosen, curve, len(start), name)
+
+
+def paper_selection(
+    blocks: list[np.ndarray],
+    rng: np.random.Generator,
+    n_starts: int = 30,
+    n_initial: int = 9,
+    until: int = 40,
+    name: str = "condition",
+) -> tuple[Selection, list[Selection]]:
+    """The second paper's procedure: greedy from ``n_starts`` random sets of ``n_initial``."""
+    n_params = blocks[0].shape[1]
+    if len(blocks) * blocks[0].shape[0] < n_params or len(blocks) < n_initial:
+        raise IdentifiabilityError(
+            f"{len(blocks)} candidates cannot identify {n_params} parameters"
+        )
+    runs = []
+    for _ in range(n_starts):
+        start = sorted(rng.choice(len(blocks), size=n_initial, replace=False).tolist())
+        runs.append(greedy(blocks, start, until, name))
+    best = runs[0]
+    for r in runs[1:]:
+        if better(name, r.final, best.final):
+            best = r
+    return best, runs
+
+
+def stopping_count(selection: Selection, rtol: float = 0.01, window: int = 3) -> int:
+    """The smallest count after which ``window`` more poses improve the index by less than
+    ``rtol`` (relative): where the curve "stops improving"."""
+    curve = np.asarray(selection.index_by_count)
+    finite = np.isfinite(curve)
+    for k in range(len(curve) - window):
+        if not finite[k]:
+            continue
+        ahead = curve[k + window]
+        gain = abs(ahead - curve[k]) / max(abs(curve[k]), 1e-300)
+        if not better(selection.index_name, ahead, curve[k]) or gain < rtol:
+            return selection.start_count + k
+    return selection.start_count + len(curve) - 1
+
+
+def exchange(
+    blocks: list[np.ndarray], start: list[int], name: str = "d_optimality", max_sweeps: int = 20
+) -> tuple[list[int], float]:
+    """Swap selected poses for candidates while that improves the index (fixed count)."""
+    chosen = list(start)
+    value = _value(blocks, chosen, name)
+    for _ in range(max_sweeps):
+        improved = False
+        for pos in range(len(chosen)):
+            best_j, best_v = -1, value
+            for j in range(len(blocks)):
+                if j in chosen:
+                    continue
+                trial = [*chosen[:pos], j, *chosen[pos + 1 :]]
+                v = _value(blocks, trial, name)
+                if better(name, v, best_v):
+                    best_j, best_v = j, v
+            if best_j >= 0:
+                chosen[pos] = best_j
+                value = best_v
+                improved = True
+        if not improved:
+            break
+    return chosen, float(value)
