@@ -55,6 +55,50 @@ def fd_jacobian(model: CalibrationModel, commands: np.ndarray, eps: float = 1e-7
     return np.array(cols).T
 
 
+def plan_comparison(
+    scenario: Scenario,
+    model: CalibrationModel,
+    params,
+    kept: list[int],
+    progress: Progress,
+) -> list[dict[str, Any]]:
+    """Translation-only layer plans: what each identifies and how well conditioned the paper
+    plan's identifiable set is under it (same columns, so the numbers compare)."""
+    out = []
+    half = tuple(v * 1e-3 for v in scenario.get("plan.half_width_mm", list))
+    zero = np.zeros(len(params))
+    for entry in scenario.get("plan_comparison.plans", list, []):
+        heights = [h * 1e-3 for h in entry["layer_heights_mm"]]
+        nodes = int(entry["nodes_per_side"])
+        poses = layer_poses(model.nominal, heights, nodes, half)
+        h = model.jacobian(zero, model.predict(zero, commands_for_poses(model.nominal, poses)))
+        n_id = spectral_reconstruction(h).rank  # equals the Steps 1-3 count (tested)
+        cols = sorted(kept)
+        cond = analyse(h[:, cols], [params.names[k] for k in cols])
+        # OLS spread for 0.005 mm noise, in mm and deg (Eq. 18 of the first paper):
+        # columns per display unit, rows in mm
+        per_unit = np.where(params.is_angle[cols], np.radians(1.0), 1e-3)
+        h_disp = h[:, cols] * per_unit * 1e3
+        spread = 0.005 * float(np.sqrt(np.trace(np.linalg.inv(h_disp.T @ h_disp))))
+        out.append(
+            {
+                "layer_heights_mm": entry["layer_heights_mm"],
+                "nodes_per_side": nodes,
+                "n_poses": len(poses),
+                "n_identifiable": n_id,
+                "condition_number_of_paper_set": cond.condition_number
+                if cond.n_identifiable == len(kept)
+                else None,
+                "ols_overall_std_for_0.005mm_noise": spread,
+            }
+        )
+        progress.note(
+            f"plan {entry['layer_heights_mm']} x {nodes}^2: {n_id} identifiable, "
+            f"cond {out[-1]['condition_number_of_paper_set']}"
+        )
+    return out
+
+
 def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]:
     t0 = time.perf_counter()
     nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
@@ -93,6 +137,7 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
     per_limb["limb4 (UP limb + wrist)"] = sum(n.startswith("limb4.") for n in kept_names)
     strip = [n.split(".", 1)[1] for n in kept_names if n.startswith("limb2.")]
     strip3 = [n.split(".", 1)[1] for n in kept_names if n.startswith("limb3.")]
+    plans = plan_comparison(scenario, model, params, kept, progress)
     # a wrist angle or node outside the plan raises before this point (WorkspaceError)
     return {
         "scenario": scenario.name,
@@ -116,5 +161,6 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
         "jacobian_fd_max_rel_err": fd_err,
         "screw_vs_twin_max_rel_err": screw_err,
         "home_check_residual_m": forward(nominal, commands[0]).residual,
+        "plans": plans,
         "runtime_s": time.perf_counter() - t0,
     }
