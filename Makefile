@@ -5,6 +5,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 NAME   ?= liu_vs_ols
 FILE   ?=
+VIEW   ?=
+VIEWFLAG := $(if $(filter 1 yes true,$(VIEW)),--view,)
 
 .PHONY: setup test test-fast scenario bench lint format view clean
 
@@ -24,9 +26,9 @@ test-fast: $(STAMP)
 
 scenario: $(STAMP)
 ifneq ($(strip $(FILE)),)
-	$(PY) -m scenarios run $(FILE)
+	$(PY) -m scenarios run $(FILE) $(VIEWFLAG)
 else
-	$(PY) -m scenarios run $(NAME)
+	$(PY) -m scenarios run $(NAME) $(VIEWFLAG)
 endif
 
 bench: $(STAMP)

@@ -16,6 +16,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("scenario")
     run.add_argument("--results", type=Path, default=None, help="results root (default results/)")
     run.add_argument("--quiet", action="store_true")
+    run.add_argument("--view", action="store_true", help="open the rerun viewer as well")
+    run.add_argument("--no-record", action="store_true", help="do not write the .rrd file")
     sub.add_parser("list", help="list the scenarios shipped in scenarios/")
     args = parser.parse_args(argv)
     if args.command == "list":
@@ -25,7 +27,13 @@ def main(argv: list[str] | None = None) -> int:
     from scenarios.runner import run_scenario
 
     try:
-        summary, out_dir = run_scenario(args.scenario, args.results, quiet=args.quiet)
+        summary, out_dir = run_scenario(
+            args.scenario,
+            args.results,
+            quiet=args.quiet,
+            view=args.view,
+            record=not args.no_record,
+        )
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

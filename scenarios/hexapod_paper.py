@@ -23,7 +23,9 @@ from calib.model import CalibrationModel
 from calib.scoring import error_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.progress import Progress
+from scenarios.recording import Recorder
 from scenarios.twin_datasets import measured_dataset, through_file
+from twin.kinematics import pose_to_frame
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set, load_values
@@ -132,7 +134,9 @@ def _identify_case(
     )
 
 
-def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]:
+def run(
+    scenario: Scenario, out_dir: Path, progress: Progress, recorder: Recorder
+) -> dict[str, Any]:
     """Run the study; returns the summary (the runner writes it)."""
     t_start = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
@@ -199,18 +203,28 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
     )
     local = nominal.target_local()
 
-    def verify(commands: np.ndarray) -> dict[str, float]:
-        targets = forward_batch(truth, commands).targets  # the true pose, no tracker noise
-        return error_stats(pose_errors(v_poses, targets, local)).as_dict()
+    recorder.log_mechanism(nominal)
+    nominal_targets = (
+        np.einsum("nij,tj->nti", pose_to_frame(v_poses)[0], local) + v_poses[:, None, :3]
+    )
 
-    summary_verify = {"verify_before": verify(v_cmd_nominal)}
+    def verify(commands: np.ndarray, stage: str) -> dict[str, float]:
+        sol = forward_batch(truth, commands)  # the true pose, no tracker noise
+        errs = pose_errors(v_poses, sol.targets, local)
+        recorder.log_error_map(stage, "verification_grid", v_poses[:, :3], errs.position * 1e3)
+        for i in range(0, len(v_poses), 8):  # one orientation per node, to keep it light
+            recorder.log_pose(f"verify_{stage}", i // 8, truth, sol.qpos[i])
+            recorder.log_targets(f"verify_{stage}", i // 8, nominal_targets[i], sol.targets[i])
+        return error_stats(errs).as_dict()
+
+    summary_verify = {"verify_before": verify(v_cmd_nominal, "before")}
     for case in cases[1:]:
         if case.result is None:
             continue
         progress.step(f"compensating and re-measuring ({case.name})")
         cmds = compensated_commands(model, case.result.values, v_poses)
         key = "verify_after" if case.name == "random_many" else f"verify_after_{case.name}"
-        summary_verify[key] = verify(cmds)
+        summary_verify[key] = verify(cmds, f"after_{case.name}")
 
     by_name = {c.name: c for c in cases}
     main = by_name["random_many"].result
@@ -227,6 +241,17 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
         "cases": {c.name: c.summary(truth_display, params) for c in cases},
         "paper": PAPER,
     }
+    for case in cases:
+        if case.result is not None:
+            for k, cost in enumerate(case.result.history):
+                recorder.log_metric(f"lm_cost/{case.name}", "lm_iteration", k, cost)
+            recorder.log_parameters(
+                case.name,
+                params.names,
+                params.to_display(case.result.values),
+                params.to_display(case.result.std_errors),
+                truth_display,
+            )
     if main is not None:
         summary["estimates_random_many"] = {
             n: {"truth_mm": float(t), "estimate_mm": float(e), "std_mm": float(s)}

@@ -26,6 +26,7 @@ from calib.model import CalibrationModel
 from calib.scoring import pose_errors
 from scenarios.config import Scenario
 from scenarios.progress import Progress
+from scenarios.recording import Recorder
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
@@ -72,7 +73,9 @@ def _stats(errors) -> dict[str, float]:
     }
 
 
-def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]:
+def run(
+    scenario: Scenario, out_dir: Path, progress: Progress, recorder: Recorder
+) -> dict[str, Any]:
     t_start = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
     nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
@@ -148,6 +151,19 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
             layers[group][stage] = _stats(errs)
             maps.setdefault(group, {})[stage] = (poses, errs)
 
+    recorder.log_mechanism(nominal)
+    for group, stages in maps.items():
+        vmax = max(float(np.max(e.position)) for _, e in stages.values()) * 1e3
+        for stage, (poses, errs) in stages.items():
+            recorder.log_error_map(stage, group, poses[:, :3], errs.position * 1e3, vmax)
+    kept_names = [params.names[k] for k in problem.columns]
+    for label, (est, _) in estimates.items():
+        shown = params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
+        recorder.log_parameters(
+            label, kept_names, est.x * np.diag(shown), est.std_errors * np.diag(shown)
+        )
+    for k, change in enumerate(coarse.relative_changes):
+        recorder.log_metric("coarse_relative_change", "coarse_round", k + 1, change)
     progress.step("Monte Carlo of the fine estimate (Eqs. 17-18)")
     runs = scenario.get("monte_carlo.runs", int)
     clean = forward_batch(truth, commands_for_poses(coarse_mech, fine_poses)).targets

@@ -28,6 +28,7 @@ from calib.observability import observability
 from calib.pose_selection import exchange, paper_selection, stopping_count
 from scenarios.config import Scenario
 from scenarios.progress import Progress
+from scenarios.recording import Recorder
 from twin.kinematics import forward
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
@@ -51,7 +52,9 @@ def _blocks(model: CalibrationModel, commands: np.ndarray) -> list[np.ndarray]:
     return [jac[k * rows : (k + 1) * rows] for k in range(len(commands))]
 
 
-def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]:
+def run(
+    scenario: Scenario, out_dir: Path, progress: Progress, recorder: Recorder
+) -> dict[str, Any]:
     t_start = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
     nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
@@ -78,6 +81,11 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
     optimal = best.indices[:n_opt]
     progress.note(f"index stops improving at {n_opt} poses")
 
+    for k, v in enumerate(best.index_by_count):
+        recorder.log_metric(f"{index}_by_count", "pose_count", best.start_count + k, v)
+    recorder.log_mechanism(nominal)
+    for i, k in enumerate(optimal):
+        recorder.log_pose("optimal_pose", i, nominal, forward(nominal, b_cmds[k]).qpos)
     progress.step("our design: D-optimal exchange over boundary + random reachable poses")
     n_extra = scenario.get("design.extra_random_candidates", int)
     _, r_cmds = random_poses(nominal, n_extra, rng)

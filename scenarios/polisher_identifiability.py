@@ -20,6 +20,7 @@ from calib.reconstruction import correlation_reconstruction, spectral_reconstruc
 from calib.screw_polisher import PolisherScrewModel
 from scenarios.config import Scenario
 from scenarios.progress import Progress
+from scenarios.recording import Recorder
 from twin.kinematics import forward
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
@@ -99,7 +100,9 @@ def plan_comparison(
     return out
 
 
-def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]:
+def run(
+    scenario: Scenario, out_dir: Path, progress: Progress, recorder: Recorder
+) -> dict[str, Any]:
     t0 = time.perf_counter()
     nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
     params = load_parameter_set(scenario.resolve(scenario.get("error_model", str)), nominal.model)
@@ -138,6 +141,13 @@ def run(scenario: Scenario, out_dir: Path, progress: Progress) -> dict[str, Any]
     strip = [n.split(".", 1)[1] for n in kept_names if n.startswith("limb2.")]
     strip3 = [n.split(".", 1)[1] for n in kept_names if n.startswith("limb3.")]
     plans = plan_comparison(scenario, model, params, kept, progress)
+    recorder.log_mechanism(nominal)
+    for i, q in enumerate(pred.qpos):
+        recorder.log_pose("node", i, nominal, q)
+    for k, lam in enumerate(spectral.eigenvalues):
+        recorder.log_metric("scaled_singular_values", "rank_index", k, float(np.sqrt(lam)))
+    recorder.log_text("identifiability/kept", "\n".join(f"* {n}" for n in kept_names))
+
     # a wrist angle or node outside the plan raises before this point (WorkspaceError)
     return {
         "scenario": scenario.name,

@@ -9,9 +9,10 @@ from typing import Any
 
 from scenarios.config import REPO_ROOT, Scenario, ScenarioError, load_scenario
 from scenarios.progress import Progress
+from scenarios.recording import Recorder
 from scenarios.results import write_json_atomic, write_text_atomic
 
-StudyFn = Callable[[Scenario, Path, Progress], dict[str, Any]]
+StudyFn = Callable[[Scenario, Path, Progress, Recorder], dict[str, Any]]
 ReportFn = Callable[[dict[str, Any]], str]
 
 
@@ -36,9 +37,16 @@ def _study(name: str) -> tuple[StudyFn, ReportFn]:
 
 
 def run_scenario(
-    name_or_path: str, results_root: Path | None = None, quiet: bool = False
+    name_or_path: str,
+    results_root: Path | None = None,
+    quiet: bool = False,
+    view: bool = False,
+    record: bool = True,
 ) -> tuple[dict[str, Any], Path]:
-    """Run one scenario; returns its summary and its output folder."""
+    """Run one scenario; returns its summary and its output folder.
+
+    The rerun recording goes to ``<out>/<name>.rrd`` (``record``); ``view`` also opens the
+    viewer."""
     scenario = load_scenario(name_or_path)
     if scenario.study not in STUDIES:
         raise ScenarioError(
@@ -48,7 +56,12 @@ def run_scenario(
     out_dir = (results_root or REPO_ROOT / "results") / scenario.name
     out_dir.mkdir(parents=True, exist_ok=True)
     progress = Progress(scenario.name, quiet=quiet)
-    summary = run(scenario, out_dir, progress)
+    rrd = out_dir / f"{scenario.name}.rrd" if record else None
+    with Recorder(rrd, f"pkm-calib-{scenario.name}", spawn_viewer=view) as recorder:
+        recorder.send_blueprint()
+        summary = run(scenario, out_dir, progress, recorder)
+    if rrd is not None:
+        summary["recording"] = rrd.name
     write_json_atomic(out_dir / "summary.json", summary)
     write_text_atomic(out_dir / "report.md", report(summary))
     progress.step(f"wrote {out_dir / 'summary.json'} and report.md")

@@ -46,6 +46,24 @@ def test_summary_keys_and_gates(hexapod_run):
 
 
 @pytest.mark.accuracy
+def test_recording_holds_the_verification(hexapod_run):
+    import rerun.chunk as rerun_chunk
+
+    summary, out_dir = hexapod_run
+    store = rerun_chunk.RrdReader(str(out_dir / summary["recording"])).store()
+    entities = list(store.schema().entity_paths())
+    assert "/error_maps/before/verification_grid" in entities
+    assert "/error_maps/after_random_many/verification_grid" in entities
+    assert "/parameters/random_many/estimate" in entities
+    times = set()
+    for chunk in store.stream():
+        batch = chunk.to_record_batch()
+        if "verify_before" in batch.schema.names:
+            times.update(batch.column("verify_before").to_pylist())
+    assert times == set(range(27))  # one pose per node of the 3 x 3 x 3 grid
+
+
+@pytest.mark.accuracy
 def test_calibration_read_the_dataset_files(hexapod_run):
     _, out_dir = hexapod_run
     ds = read_dataset(out_dir / "datasets" / "random_many.csv", expected_model="hexapod_rrrprr")
