@@ -22,6 +22,7 @@ from calib.identify import IdentificationResult, bind_dataset, identify
 from calib.model import CalibrationModel
 from calib.scoring import error_stats, pose_errors
 from scenarios.config import Scenario
+from scenarios.figures import parameter_bars_png
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.twin_datasets import measured_dataset, through_file
@@ -253,6 +254,16 @@ def run(
                 truth_display,
             )
     if main is not None:
+        parameter_bars_png(
+            out_dir / "estimates_random_many.png",
+            "hexapod: 54 estimates from 256 noisy poses (mm)",
+            params.names,
+            params.to_display(main.values),
+            params.to_display(main.std_errors),
+            truth_display,
+            "mm",
+        )
+        summary["figures"] = {"estimates_random_many": "estimates_random_many.png"}
         summary["estimates_random_many"] = {
             n: {"truth_mm": float(t), "estimate_mm": float(e), "std_mm": float(s)}
             for n, t, e, s in zip(

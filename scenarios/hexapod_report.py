@@ -115,6 +115,8 @@ def report(s: dict[str, Any]) -> str:
         "  scored on its 29 calibration poses, not on a separate verification grid.",
         "",
     ]
+    for name, path in (s.get("figures") or {}).items():
+        lines += [f"![{name}]({path})", ""]
     est = s.get("estimates_random_many")
     if est:
         lines += [

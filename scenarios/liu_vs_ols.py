@@ -25,6 +25,7 @@ from calib.fine import estimate, fine_problem
 from calib.model import CalibrationModel
 from calib.scoring import pose_errors
 from scenarios.config import Scenario
+from scenarios.figures import parameter_bars_png
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.truth_draw import TruthSpec, draw_truth
@@ -212,5 +213,19 @@ def run(
     from scenarios.liu_vs_ols_figures import write_figures
 
     summary["figures"] = write_figures(out_dir, maps)
+    for label in ("ols", "liu"):
+        if label in estimates:
+            est = estimates[label][0]
+            shown = np.diag(
+                params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
+            )
+            parameter_bars_png(
+                out_dir / f"estimates_{label}.png",
+                f"polisher: {label} estimates of the identifiable set (mm, deg)",
+                [params.names[k] for k in problem.columns],
+                est.x * shown,
+                est.std_errors * shown,
+            )
+            summary["figures"][f"estimates_{label}"] = f"estimates_{label}.png"
     summary["runtime_s"] = time.perf_counter() - t_start
     return summary

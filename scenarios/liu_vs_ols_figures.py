@@ -2,36 +2,25 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
-
-def _save(fig, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
-    finally:
-        plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+from scenarios.figures import plt, save_png
 
 
 def _panel_map(
     path: Path, title: str, panels: list[tuple[str, np.ndarray, np.ndarray]], label: str
 ) -> None:
     vmax = max(float(np.max(v)) for _, _, v in panels)
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.6 * len(panels), 3.6), squeeze=False)
+    fig, axes = plt.subplots(
+        1,
+        len(panels),
+        figsize=(3.2 * len(panels) + 1.2, 3.6),
+        squeeze=False,
+        constrained_layout=True,
+    )
     for ax, (name, xy, values) in zip(axes[0], panels, strict=True):
         sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, cmap="viridis", vmin=0, vmax=vmax, s=60)
         k = int(np.argmax(values))
@@ -44,7 +33,7 @@ def _panel_map(
         ax.set_aspect("equal")
     fig.colorbar(sc, ax=axes[0].tolist(), label=label, shrink=0.85)
     fig.suptitle(title, fontsize=10)
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def write_figures(out_dir: Path, maps: dict[str, dict[str, Any]]) -> dict[str, str]:
@@ -64,9 +53,19 @@ def write_figures(out_dir: Path, maps: dict[str, dict[str, Any]]) -> dict[str, s
                 ("position", panels_pos, "position error (mm)"),
                 ("orientation", panels_ori, "orientation error (deg)"),
             ):
-                name = f"error_map_{tag}_{qty}.png"
-                _panel_map(
-                    out_dir / name, f"{group} layer z = {z * 1e3:+.0f} mm: {qty}", panels, label
-                )
-                written[f"{tag}_{qty}"] = name
+                # the coarse stage on its own scale, the fine stages on one shared scale
+                for part, chosen in (
+                    ("coarse", [p for p in panels if p[0] == "coarse"]),
+                    ("fine", [p for p in panels if p[0] != "coarse"]),
+                ):
+                    if not chosen:
+                        continue
+                    name = f"error_map_{tag}_{qty}_{part}.png"
+                    _panel_map(
+                        out_dir / name,
+                        f"{group} layer z = {z * 1e3:+.0f} mm: {qty} after {part} calibration",
+                        chosen,
+                        label,
+                    )
+                    written[f"{tag}_{qty}_{part}"] = name
     return written

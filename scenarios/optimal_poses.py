@@ -27,6 +27,7 @@ from calib.model import CalibrationModel
 from calib.observability import observability
 from calib.pose_selection import exchange, paper_selection, stopping_count
 from scenarios.config import Scenario
+from scenarios.figures import index_vs_count_png
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics import forward
@@ -160,9 +161,21 @@ def run(
         }
         for name, r in results.items()
     }
+    counts = list(range(best.start_count, best.start_count + len(best.index_by_count)))
+    index_vs_count_png(
+        out_dir / "index_vs_count.png",
+        f"hexapod: {index} index of the greedy selection (best and all {n_starts} starts)",
+        counts,
+        {
+            "best start": best.index_by_count,
+            **{f"start {k}": r.index_by_count for k, r in enumerate(runs[:5])},
+        },
+        f"{index} (column-scaled)",
+    )
     return {
         "scenario": scenario.name,
         "model": nominal.name,
+        "figures": {"index_vs_count": "index_vs_count.png"},
         "index": index,
         "index_by_count": best.index_by_count,
         "index_counts": list(range(best.start_count, best.start_count + len(best.index_by_count))),

@@ -48,6 +48,8 @@ def report(s: dict[str, Any]) -> str:
         "`exchange` is our design: a DETMAX exchange maximising D-optimality over the boundary",
         "poses and random reachable ones, at the same count as the paper's optimal set.",
         "",
+        "![index against pose count](index_vs_count.png)",
+        "",
         "Index against pose count (best greedy run): "
         + ", ".join(
             f"{c}: {v:.4g}" for c, v in zip(s["index_counts"], s["index_by_count"], strict=True)
