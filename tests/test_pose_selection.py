@@ -99,3 +99,15 @@ def test_optimal_poses_scenario_quick(tmp_path):
             assert s[name][key] is not None and s[name][key] > 0
     # the selected set is better conditioned than random poses of the same count
     assert s["optimal"]["index_condition"] < s["random_same_count"]["index_condition"]
+
+
+def test_candidate_set_with_unreachable_poses_is_refused():
+    """A user's candidate list: each pose must be inside the box and within the strokes."""
+    from twin.workspace import commands_for_poses
+
+    mech = Mechanism.from_xml(ROOT / "models/hexapod_rrrprr.xml")
+    poses = np.array([[0, 0, 0.22, 0, 0, 0], [0, 0, 0.30, 0, 0, 0], [0, 0, 0.24, 0.26, 0.26, 0]])
+    with pytest.raises(WorkspaceError, match="pose 1: pose z = 300 mm is outside the workspace"):
+        commands_for_poses(mech, poses)
+    with pytest.raises(WorkspaceError, match=r"pose 2: .*not reachable.*stroke"):
+        commands_for_poses(mech, poses[[0, 0, 2]])
