@@ -195,7 +195,9 @@ def run(
         "coarse_iterations": coarse.iterations,
         "coarse_converged": coarse.converged,
         "coarse_relative_changes": coarse.relative_changes,
-        "liu_d": liu_est.bias_parameter if liu_est is not None else None,
+        # d / k: 0 is ridge with Liu's k, 1 is OLS (the paper's d, whose k is 1)
+        "liu_d": liu_est.bias_parameter / liu_est.scale_parameter if liu_est is not None else None,
+        "liu_k": liu_est.scale_parameter if liu_est is not None else None,
         "liu_notes": list(liu_est.notes) if liu_est is not None else [],
         "eta_percent": eta,
         "eta_percent_liu_k1": (1.0 - spread["liu_k1"] / sigma_ols) * 100.0,

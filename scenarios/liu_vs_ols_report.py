@@ -13,7 +13,8 @@ def report(s: dict[str, Any]) -> str:
         f"Source errors in the truth: {s['n_source_errors']} (paper: {paper['n_source_errors']});"
         f" identifiable from the fine plan (Steps 1-3): {s['n_identifiable']} (paper: "
         f"{paper['n_identifiable']}). Coarse calibration: {s['coarse_iterations']} rounds "
-        f"(converged: {s['coarse_converged']}). Liu d = {s['liu_d']}. Runtime "
+        f"(converged: {s['coarse_converged']}). Liu d/k = {s['liu_d']:.3g} (k = {s['liu_k']:.3g}). "
+        f"Runtime "
         f"{s['runtime_s']:.1f} s.",
         "",
     ]

@@ -33,7 +33,8 @@ def test_summary_contract(summary):
                 assert summary["layers"][group][stage][q] >= 0.0
     assert summary["n_source_errors"] == 150
     assert summary["n_identifiable"] == 51
-    assert summary["liu_d"] >= 0.0  # d lies in [0, k], k in the notes
+    assert 0.0 <= summary["liu_d"] <= 1.0  # d / k: 0 is ridge, 1 is OLS
+    assert summary["liu_k"] > 0.0
 
 
 @pytest.mark.accuracy

@@ -23,6 +23,7 @@ class LinearEstimate:
     sigma2: float  # noise variance used
     bias_parameter: float | None = None  # Liu d, ridge k, PCR component count
     notes: tuple[str, ...] = ()
+    scale_parameter: float | None = None  # Liu's k (the paper's Eq. 11 has k = 1)
 
 
 class Estimator(Protocol):
@@ -105,11 +106,12 @@ def estimate_from_map(
     sigma2: float,
     bias: float | None,
     notes: tuple[str, ...] = (),
+    scale: float | None = None,
 ) -> LinearEstimate:
     """Package a linear estimator b_s = a_s y (scaled units) in original units."""
     b_s = a_s @ y
     cov = prob.unscale_cov(sigma2 * (a_s @ a_s.T))
     x = b_s / prob.scale
     return LinearEstimate(
-        method, x, cov, np.sqrt(np.clip(np.diag(cov), 0, None)), sigma2, bias, notes
+        method, x, cov, np.sqrt(np.clip(np.diag(cov), 0, None)), sigma2, bias, notes, scale
     )

@@ -100,7 +100,7 @@ class Liu:
             d = float(self.d)
         notes.append(f"k = {k:.4g} ({'Hoerl-Kennard-Baldwin' if self.k == 'hkb' else 'given'})")
         a_s = (prob.vt.T * ((lam + d) / (lam + k) / prob.s)) @ prob.u.T
-        return estimate_from_map(self.name, prob, a_s, y, s2, d, tuple(notes))
+        return estimate_from_map(self.name, prob, a_s, y, s2, d, tuple(notes), k)
 
     def fit_many(self, h: np.ndarray, ys: np.ndarray) -> np.ndarray:
         prob = prepare(h, ys)
