@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from calib.model import CalibrationModel
+from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import inverse
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
 from twin.sensitivity import tool_twist_jacobian
@@ -22,6 +23,24 @@ def compensated_commands(
 ) -> np.ndarray:
     """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected."""
     return commands_for_poses(model.mechanism(values), poses)
+
+
+def reachable_compensated_commands(
+    model: CalibrationModel, values: np.ndarray, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`compensated_commands`, but a pose whose compensated commands leave a
+    stroke is reported (mask False, its row NaN) instead of stopping the whole set: near the
+    workspace boundary the real machine may not reach what its nominal model could."""
+    mech = model.mechanism(values)
+    out = np.full((len(poses), mech.n_actuators), np.nan)
+    ok = np.zeros(len(poses), dtype=bool)
+    for i, pose in enumerate(np.atleast_2d(poses)):
+        try:
+            out[i] = commands_for_poses(mech, pose[None])[0]
+            ok[i] = True
+        except (WorkspaceError, ClosureError):
+            continue
+    return out, ok
 
 
 def twist_compensated_commands(

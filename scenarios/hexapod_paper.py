@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.compensation import compensated_commands
+from calib.compensation import reachable_compensated_commands
 from calib.exceptions import CalibError
 from calib.identify import IdentificationResult, bind_dataset, identify
 from calib.model import CalibrationModel
@@ -25,6 +25,7 @@ from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
+from scenarios.truth_draw import TruthSpec, draw_truth
 from scenarios.twin_datasets import measured_dataset, through_file
 from twin.kinematics import pose_to_frame
 from twin.kinematics_batch import forward_batch
@@ -143,7 +144,10 @@ def run(
     rng = np.random.default_rng(scenario.get("seed", int))
     nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
     params = load_parameter_set(scenario.resolve(scenario.get("error_model", str)), nominal.model)
-    truth_values = load_values(scenario.resolve(scenario.get("truth.values_file", str)), params)
+    if scenario.get("truth.values_file", str, None) is not None:
+        truth_values = load_values(scenario.resolve(scenario.get("truth.values_file", str)), params)
+    else:  # a seeded random draw, e.g. the paper's "random errors within +-1 mm"
+        truth_values = draw_truth(params, TruthSpec.from_scenario(scenario), rng)
     truth = Mechanism(params.inject(nominal.model, truth_values), name=nominal.name)
     truth_display = params.to_display(truth_values)
     model = CalibrationModel(nominal, params)
@@ -209,23 +213,26 @@ def run(
         np.einsum("nij,tj->nti", pose_to_frame(v_poses)[0], local) + v_poses[:, None, :3]
     )
 
-    def verify(commands: np.ndarray, stage: str) -> dict[str, float]:
-        sol = forward_batch(truth, commands)  # the true pose, no tracker noise
-        errs = pose_errors(v_poses, sol.targets, local)
-        recorder.log_error_map(stage, "verification_grid", v_poses[:, :3], errs.position * 1e3)
-        for i in range(0, len(v_poses), 8):  # one orientation per node, to keep it light
-            recorder.log_pose(f"verify_{stage}", i // 8, truth, sol.qpos[i])
-            recorder.log_targets(f"verify_{stage}", i // 8, nominal_targets[i], sol.targets[i])
-        return error_stats(errs).as_dict()
+    def verify(commands: np.ndarray, stage: str, ok: np.ndarray | None = None) -> dict:
+        ok = np.ones(len(commands), dtype=bool) if ok is None else ok
+        sol = forward_batch(truth, commands[ok])  # the true pose, no tracker noise
+        errs = pose_errors(v_poses[ok], sol.targets, local)
+        recorder.log_error_map(stage, "verification_grid", v_poses[ok, :3], errs.position * 1e3)
+        for k, i in enumerate(np.flatnonzero(ok)[::8]):  # one orientation per node
+            recorder.log_pose(f"verify_{stage}", k, truth, sol.qpos[8 * k])
+            recorder.log_targets(f"verify_{stage}", k, nominal_targets[i], sol.targets[8 * k])
+        stats = error_stats(errs).as_dict()
+        stats["n_unreachable_after_compensation"] = int(np.sum(~ok))
+        return stats
 
     summary_verify = {"verify_before": verify(v_cmd_nominal, "before")}
     for case in cases[1:]:
         if case.result is None:
             continue
         progress.step(f"compensating and re-measuring ({case.name})")
-        cmds = compensated_commands(model, case.result.values, v_poses)
+        cmds, ok = reachable_compensated_commands(model, case.result.values, v_poses)
         key = "verify_after" if case.name == "random_many" else f"verify_after_{case.name}"
-        summary_verify[key] = verify(cmds, f"after_{case.name}")
+        summary_verify[key] = verify(cmds, f"after_{case.name}", ok)
 
     by_name = {c.name: c for c in cases}
     main = by_name["random_many"].result

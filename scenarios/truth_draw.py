@@ -25,9 +25,9 @@ class TruthSpec:
         return cls(
             distribution=scenario.get(f"{key}.distribution", str, "uniform"),
             translation_mm=scenario.get(f"{key}.translation_mm", float),
-            rotation_deg=scenario.get(f"{key}.rotation_deg", float),
-            encoder_mm=scenario.get(f"{key}.encoder_mm", float),
-            encoder_deg=scenario.get(f"{key}.encoder_deg", float),
+            rotation_deg=scenario.get(f"{key}.rotation_deg", float, 0.0),
+            encoder_mm=scenario.get(f"{key}.encoder_mm", float, 0.0),
+            encoder_deg=scenario.get(f"{key}.encoder_deg", float, 0.0),
         )
 
 

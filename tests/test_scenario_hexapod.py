@@ -110,3 +110,21 @@ def test_scenario_errors_name_the_cause(tmp_path):
 def test_cli_reports_scenario_errors(capsys):
     assert cli(["run", "nope"]) == 2
     assert "no scenario named" in capsys.readouterr().err
+
+
+@pytest.mark.accuracy
+def test_other_truth_draws(tmp_path):
+    """A seeded random truth (the paper's "errors within +-1 mm") instead of Table 2."""
+    text = (ROOT / "scenarios/hexapod_paper.toml").read_text()
+    text = text.replace('values_file = "truth/hexapod_table2.toml"', "")
+    text = text.replace(
+        "[pose_noise]",
+        '[truth.random]\ndistribution = "uniform"\ntranslation_mm = 1.0\n\n[pose_noise]',
+    )
+    text = text.replace("seed = 2019", "seed = 4").replace("many_poses = 256", "many_poses = 128")
+    path = _write(tmp_path, text)
+    s, _ = run_scenario(str(path), tmp_path, quiet=True, record=False)
+    assert s["recovery_noise_free_max_abs_mm"] < 1e-6
+    after, before = s["verify_after"], s["verify_before"]
+    assert after["pos_peak_mm"] < before["pos_peak_mm"] / 10
+    assert after["n_unreachable_after_compensation"] < 0.1 * s["n_verification_poses"]
