@@ -69,7 +69,8 @@ def report(s: dict[str, Any]) -> str:
         if v:
             lines.append(
                 f"| {label} | {_f(v['pos_peak_mm'])} | {_f(v['pos_std_mm'])} | "
-                f"{_f(v['ori_peak_deg'])} | {_f(v['ori_std_deg'])} |"
+                f"{_f(v['ori_peak_deg'])} | {_f(v['ori_std_deg'])} | "
+                f"{v.get('n_unreachable_after_compensation', 0)} |"
             )
     t6b, t6a = paper["table6_before"], paper["table6_after"]
     lines += [
