@@ -16,7 +16,7 @@ import numpy as np
 from mujoco.batch import Batch
 
 from twin.closure import closure_sites
-from twin.exceptions import ClosureError
+from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import ACCEPT, MAX_ITER, MAX_STEP, TOLERANCE, check_commands
 from twin.mechanism import Mechanism
 from twin.rotations import quat_from_rotvec, quat_multiply, rotvec_from_matrix
@@ -204,7 +204,10 @@ def forward_batch(
     """
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
     if commands.shape[1:] != (mech.n_actuators,):
-        raise ClosureError(f"commands must be (N, {mech.n_actuators}), got {commands.shape}")
+        raise WorkspaceError(
+            f"expected {mech.n_actuators} actuator commands {mech.actuator_names} per pose, "
+            f"got shape {commands.shape}"
+        )
     lo, hi = mech.actuator_range[:, 0], mech.actuator_range[:, 1]
     bad = ~np.all(np.isfinite(commands), axis=1)
     bad |= np.any((commands < lo - 1e-12) | (commands > hi + 1e-12), axis=1)

@@ -38,7 +38,13 @@ def load_parameter_set(path: str | Path, model: mujoco.MjModel) -> ParameterSet:
         missing = [f for f in ("name", "kind", "element") if f not in e]
         if missing:
             raise ParameterError(f"{path}: parameter #{k + 1} lacks {missing}")
-        axis = tuple(float(x) for x in e.get("axis", (0.0, 0.0, 0.0)))
+        raw = e.get("axis", (0.0, 0.0, 0.0))
+        try:
+            axis = tuple(float(x) for x in raw)
+        except (TypeError, ValueError):
+            raise ParameterError(
+                f"{path}: parameter '{e['name']}' axis must be 3 numbers, got {raw!r}"
+            ) from None
         if len(axis) != 3:
             raise ParameterError(f"{path}: parameter '{e['name']}' axis must have 3 components")
         params.append(Parameter(str(e["name"]), str(e["kind"]), str(e["element"]), axis))
@@ -54,6 +60,8 @@ def values_from_display(
         raise ParameterError(f"{source}: unknown parameter names {unknown}")
     shown = np.zeros(len(params))
     for name, v in display.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ParameterError(f"{source}: value of '{name}' must be a number, got {v!r}")
         if not np.isfinite(float(v)):
             raise ParameterError(f"{source}: value of '{name}' is not finite")
         shown[params.index(name)] = float(v)

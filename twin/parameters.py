@@ -44,6 +44,10 @@ class Parameter:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ParameterError(f"parameter '{self.name}': kind '{self.kind}' not in {KINDS}")
+        if len(tuple(self.axis)) != 3:
+            raise ParameterError(
+                f"parameter '{self.name}': axis {self.axis} must have 3 components"
+            )
         if self.kind != "joint_zero":
             n = float(np.linalg.norm(self.axis))
             if not np.isclose(n, 1.0, atol=1e-9):
