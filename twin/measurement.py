@@ -7,10 +7,12 @@ and passes them through the tracker (distance-dependent noise, repeats, scale er
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from twin.effects.base import ActuatorEffect, apply_actuator_effects
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.tracker import PoseNoise, Tracker
@@ -30,9 +32,16 @@ def measure(
     tracker: Tracker,
     rng: np.random.Generator,
     pose_noise: PoseNoise | None = None,
+    effects: Sequence[ActuatorEffect] = (),
+    order: np.ndarray | None = None,
 ) -> Measurement:
-    """Tracker readings of every target at every command row (N, A)."""
-    sol = forward_batch(truth, commands)
+    """Tracker readings of every target at every command row (N, A).
+
+    ``effects`` (thermal growth, lead error, backlash, gravity compliance, ...) turn the
+    commands into the joint values the machine really takes, in measurement ``order``.
+    """
+    joints = apply_actuator_effects(truth, effects, commands, order) if effects else commands
+    sol = forward_batch(truth, joints)
     targets = sol.targets
     if pose_noise is not None:
         local = truth.target_local()
