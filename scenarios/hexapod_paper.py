@@ -23,14 +23,13 @@ from calib.model import CalibrationModel
 from calib.scoring import error_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png
+from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
-from scenarios.truth_draw import TruthSpec, draw_truth
 from scenarios.twin_datasets import measured_dataset, through_file
 from twin.kinematics import pose_to_frame
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import PoseNoise, Tracker, TrackerNoise
 from twin.workspace import grid_poses, random_poses
 
@@ -142,15 +141,11 @@ def run(
     """Run the study; returns the summary (the runner writes it)."""
     t_start = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
-    nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
-    params = load_parameter_set(scenario.resolve(scenario.get("error_model", str)), nominal.model)
-    if scenario.get("truth.values_file", str, None) is not None:
-        truth_values = load_values(scenario.resolve(scenario.get("truth.values_file", str)), params)
-    else:  # a seeded random draw, e.g. the paper's "random errors within +-1 mm"
-        truth_values = draw_truth(params, TruthSpec.from_scenario(scenario), rng)
-    truth = Mechanism(params.inject(nominal.model, truth_values), name=nominal.name)
+    machine = load_machine(scenario, rng)
+    nominal, params, truth = machine.nominal, machine.params, machine.truth
+    truth_values = machine.truth_values
     truth_display = params.to_display(truth_values)
-    model = CalibrationModel(nominal, params)
+    model = machine.calibration_model()
 
     tracker = Tracker(
         position_m=tuple(v * 1e-3 for v in scenario.get("tracker.position_mm", list)),

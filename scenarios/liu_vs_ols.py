@@ -22,16 +22,13 @@ from calib.coarse import coarse_calibration
 from calib.compensation import twist_compensated_commands
 from calib.estimators.registry import make_estimator
 from calib.fine import estimate, fine_problem
-from calib.model import CalibrationModel
 from calib.scoring import pose_errors
 from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png
+from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
-from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.kinematics_batch import forward_batch
-from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import commands_for_poses, layer_poses
 
@@ -79,11 +76,9 @@ def run(
 ) -> dict[str, Any]:
     t_start = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
-    nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
-    params = load_parameter_set(scenario.resolve(scenario.get("error_model", str)), nominal.model)
-    truth_values = draw_truth(params, TruthSpec.from_scenario(scenario), rng)
-    truth = Mechanism(params.inject(nominal.model, truth_values), name=nominal.name)
-    model = CalibrationModel(nominal, params)
+    machine = load_machine(scenario, rng)
+    nominal, params, truth = machine.nominal, machine.params, machine.truth
+    model = machine.calibration_model()
     encoder = np.array([n.endswith(".encoder") for n in params.names])
     sigma = scenario.get("tracker.sigma_mm", float) * 1e-3
     tracker = Tracker(

@@ -28,12 +28,11 @@ from calib.observability import observability
 from calib.pose_selection import exchange, paper_selection, stopping_count
 from scenarios.config import Scenario
 from scenarios.figures import index_vs_count_png
+from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics import forward
 from twin.kinematics_batch import forward_batch
-from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.sensitivity import tool_twist_jacobian
 from twin.tracker import PoseNoise
 from twin.workspace import boundary_poses, grid_poses, random_poses
@@ -58,11 +57,10 @@ def run(
 ) -> dict[str, Any]:
     t_start = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
-    nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
-    params = load_parameter_set(scenario.resolve(scenario.get("error_model", str)), nominal.model)
-    truth_values = load_values(scenario.resolve(scenario.get("truth.values_file", str)), params)
-    truth = Mechanism(params.inject(nominal.model, truth_values), name=nominal.name)
-    model = CalibrationModel(nominal, params)
+    machine = load_machine(scenario, rng)
+    nominal, params, truth = machine.nominal, machine.params, machine.truth
+    truth_values = machine.truth_values
+    model = machine.calibration_model()
     noise = PoseNoise(
         kind=scenario.get("pose_noise.kind", str),
         position_m=scenario.get("pose_noise.position_mm", float) * 1e-3,
