@@ -107,8 +107,8 @@ def newton_solve(
     )
 
 
-def check_commands(mech: Mechanism, commands: np.ndarray) -> np.ndarray:
-    """Validate actuator commands (A,) against shape, finiteness and stroke."""
+def check_commands(mech: Mechanism, commands: np.ndarray, stroke: bool = True) -> np.ndarray:
+    """Validate actuator commands (A,) against shape, finiteness and (``stroke``) the limits."""
     c = np.asarray(commands, dtype=float)
     if c.shape != (mech.n_actuators,):
         raise WorkspaceError(
@@ -116,6 +116,8 @@ def check_commands(mech: Mechanism, commands: np.ndarray) -> np.ndarray:
         )
     if not np.all(np.isfinite(c)):
         raise WorkspaceError(f"non-finite actuator command: {c}")
+    if not stroke:
+        return c
     lo, hi = mech.actuator_range[:, 0], mech.actuator_range[:, 1]
     bad = np.flatnonzero((c < lo - 1e-12) | (c > hi + 1e-12))
     if bad.size:
@@ -142,9 +144,17 @@ def _solution(mech: Mechanism, q: np.ndarray, err: float, it: int) -> Solution:
     )
 
 
-def forward(mech: Mechanism, commands: np.ndarray, start: np.ndarray | None = None) -> Solution:
-    """Closed-chain forward kinematics for actuator commands (A,) (SI)."""
-    c = check_commands(mech, commands)
+def forward(
+    mech: Mechanism,
+    commands: np.ndarray,
+    start: np.ndarray | None = None,
+    check_stroke: bool = True,
+) -> Solution:
+    """Closed-chain forward kinematics for actuator commands (A,) (SI).
+
+    ``check_stroke=False`` is for joint values that effects (deflection, backlash) move a
+    few micrometres past a limit the command itself respects."""
+    c = check_commands(mech, commands, stroke=check_stroke)
     q = np.array(mech.home_qpos if start is None else start, dtype=float)
     q[mech.actuator_qpos] = c
     q, err, it = newton_solve(mech, q, mech.free_dofs())

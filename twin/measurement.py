@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.effects.base import ActuatorEffect, apply_actuator_effects
+from twin.kinematics import check_commands
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.tracker import PoseNoise, Tracker
@@ -24,6 +25,14 @@ class Measurement:
     true_targets: np.ndarray  # (P, T, 3)
     true_rotation: np.ndarray  # (P, 3, 3) tool frame
     true_position: np.ndarray  # (P, 3)
+
+
+def check_commands_batch(mech: Mechanism, commands: np.ndarray) -> None:
+    for k, c in enumerate(np.atleast_2d(commands)):
+        try:
+            check_commands(mech, c)
+        except Exception as exc:
+            raise type(exc)(f"pose {k}: {exc}") from None
 
 
 def measure(
@@ -40,8 +49,9 @@ def measure(
     ``effects`` (thermal growth, lead error, backlash, gravity compliance, ...) turn the
     commands into the joint values the machine really takes, in measurement ``order``.
     """
+    check_commands_batch(truth, commands)  # the commands must respect the strokes ...
     joints = apply_actuator_effects(truth, effects, commands, order) if effects else commands
-    sol = forward_batch(truth, joints)
+    sol = forward_batch(truth, joints, check_stroke=False)  # ... effects may nudge past them
     targets = sol.targets
     if pose_noise is not None:
         local = truth.target_local()
