@@ -93,7 +93,8 @@ class CandidateScore:
     n_parameters: int
     heldout_rms_mm: float
     bic: float
-    theta: np.ndarray
+    theta: np.ndarray  # effect parameters
+    geometry: np.ndarray  # correction of the estimated geometric parameters (SI)
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,7 @@ class Diagnosis:
     chosen: str = "none"
     reason: str = ""
     coefficients: dict[str, np.ndarray] = field(default_factory=dict)  # effect parameters
+    geometry_correction: np.ndarray | None = None  # for the estimated geometric parameters
 
 
 def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
@@ -174,7 +176,7 @@ def diagnose(
         rss = float(np.sum((r.reshape(-1) - x.reshape(-1, x.shape[2]) @ coef) ** 2))
         k = x.shape[2] - p
         bic = n * np.log(rss / n) + (p + k) * np.log(n)
-        return CandidateScore(name, k, float(np.sqrt(sq / n)) * 1e3, bic, coef[p:])
+        return CandidateScore(name, k, float(np.sqrt(sq / n)) * 1e3, bic, coef[p:], coef[:p])
 
     rms = float(np.sqrt(np.mean(r**2))) * 1e3
     scores = {name: score(name, [eff]) for name, eff in blocks.items()}
@@ -212,7 +214,26 @@ def diagnose(
         reason=f"{' and '.join(chosen)} {'lower' if len(chosen) > 1 else 'lowers'} the held-out "
         "error from "
         f"{scores['none'].heldout_rms_mm:.4g} to {current.heldout_rms_mm:.4g} mm",
+        geometry_correction=current.geometry,
         coefficients=dict(
             zip(chosen, _split(current.theta, [blocks[c].shape[2] for c in chosen]), strict=True)
         ),
     )
+
+
+def effect_offsets(
+    model: CalibrationModel,
+    values: np.ndarray,
+    commands: np.ndarray,
+    order: np.ndarray,
+    chosen: dict[str, np.ndarray],
+    candidates: list[Candidate] | None = None,
+) -> np.ndarray:
+    """Actuator offsets (N, A) that the chosen effects predict for these commands."""
+    library = {c.name: c for c in candidates or default_candidates(model.nominal.actuator_names)}
+    out = np.zeros_like(np.asarray(commands, dtype=float))
+    for name, theta in chosen.items():
+        out += np.einsum(
+            "nak,k->na", library[name].regressor(model, values, commands, order), theta
+        )
+    return out

@@ -1,0 +1,76 @@
+"""The undeclared_effect scenario and the diagnose command on its dataset files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from calib.__main__ import main as calib_cli
+from scenarios.runner import run_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return run_scenario("undeclared_effect", tmp_path_factory.mktemp("results"), quiet=True)
+
+
+@pytest.mark.accuracy
+def test_summary_contract_and_loop_closed(run):
+    s, _ = run
+    for key in (
+        "residual_rms_before_mm",
+        "residual_rms_after_mm",
+        "noise_floor_rms_mm",
+        "diagnosed_effect",
+        "candidates",
+    ):
+        assert key in s
+    assert set(s["diagnosed_effect"].split("+")) == {"backlash", "thermal_growth"}
+    # the loop closes: the residual falls to the tracker noise ...
+    assert s["residual_rms_before_mm"] > 2 * s["noise_floor_rms_mm"]
+    assert s["residual_rms_after_mm"] < 1.1 * s["noise_floor_rms_mm"]
+    # ... and poses not used to fit are predicted better
+    before, after = s["test"]["before"], s["test"]["after"]
+    for q in ("pos_max_mm", "pos_mean_mm", "ori_max_deg", "ori_mean_deg"):
+        assert after[q] < before[q]
+
+
+@pytest.mark.accuracy
+def test_diagnose_command_on_the_scenario_files(run, tmp_path, capsys):
+    _, out_dir = run
+    out = tmp_path / "diag.json"
+    code = calib_cli(
+        [
+            "diagnose",
+            "--model",
+            str(ROOT / "models/hexapod_rrrprr.xml"),
+            "--errors",
+            str(ROOT / "models/hexapod_rrrprr.params.toml"),
+            "--data",
+            str(out_dir / "datasets" / "calibration.csv"),
+            "--sigma-mm",
+            "0.005",
+            "--out",
+            str(out),
+        ]
+    )
+    assert code == 0
+    assert "diagnosis: backlash+thermal_growth" in capsys.readouterr().out
+    assert json.loads(out.read_text())["chi2_p_value"] < 0.01
+
+
+def test_unknown_effect_in_a_scenario_is_named(tmp_path):
+    from scenarios.config import ScenarioError
+
+    text = (ROOT / "scenarios/undeclared_effect.toml").read_text()
+    text = text.replace('kind = "backlash"', 'kind = "creep"').replace(
+        'values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/'
+    )
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match="unknown effect 'creep'"):
+        run_scenario(str(path), tmp_path, quiet=True, record=False)
