@@ -88,7 +88,15 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     obs = bind_dataset(model.nominal, dataset)
     result = identify(model, obs, unidentifiable="fix")
     order = dataset.order if dataset.order is not None else None
-    diag = diagnose(model, obs, result, args.sigma_mm * 1e-3, order=order)
+    head = (dataset.tracker or {}).get("position_mm")
+    diag = diagnose(
+        model,
+        obs,
+        result,
+        args.sigma_mm * 1e-3,
+        order=order,
+        tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
+    )
     print(
         f"geometric residual {diag.residual_rms_mm:.4f} mm RMS per coordinate; tracker noise "
         f"{diag.noise_floor_rms_mm:.4f} mm; chi-square p = {diag.chi2_p_value:.3g}"

@@ -144,8 +144,12 @@ def diagnose(
     folds: int = 5,
     alpha: float = 0.01,
     min_gain: float = 0.1,
+    tracker_position_m: np.ndarray | None = None,
 ) -> Diagnosis:
-    """Diagnose the residual of a geometric calibration ``result`` on ``obs``."""
+    """Diagnose the residual of a geometric calibration ``result`` on ``obs``.
+
+    With ``tracker_position_m`` (the head in the base frame, from the dataset's sidecar) the
+    library also holds a scale error of the tracker: readings stretched about its head."""
     n_poses = len(obs.commands)
     order = np.arange(n_poses) if order is None else np.asarray(order)
     values = result.values
@@ -162,6 +166,9 @@ def diagnose(
     for c in candidates or default_candidates(model.nominal.actuator_names):
         d = c.regressor(model, values, obs.commands, order)  # (N, A, k)
         blocks[c.name] = np.einsum("nra,nak->nrk", j_act, d)
+    if tracker_position_m is not None:
+        lever = pred.targets - np.asarray(tracker_position_m, dtype=float)  # (N, T, 3)
+        blocks["tracker_scale"] = lever.reshape(n_poses, -1, 1)
     fold_of = np.arange(n_poses) % folds
 
     def score(name: str, extra: list[np.ndarray]) -> CandidateScore:

@@ -70,7 +70,13 @@ def run(
     nominal, params, truth = machine.nominal, machine.params, machine.truth
     effects = _effects(scenario)
     sigma = scenario.get("tracker.sigma_mm", float) * 1e-3
-    tracker = Tracker(noise=TrackerNoise("gaussian", sigma, 0.0))
+    tracker = Tracker(
+        position_m=tuple(
+            v * 1e-3 for v in scenario.get("tracker.position_mm", list, [1200.0, 0.0, 300.0])
+        ),
+        noise=TrackerNoise("gaussian", sigma, 0.0),
+        scale_error=scenario.get("truth.tracker_scale_error", float, 0.0),
+    )
     n_cal = scenario.get("plan.calibration_poses", int)
     n_test = scenario.get("plan.test_poses", int)
     poses, commands = random_poses(nominal, n_cal + n_test, rng)
@@ -91,7 +97,10 @@ def run(
 
     progress.step("geometric calibration, then the residual diagnosis")
     result = identify(model, cal)
-    diag = diagnose(model, cal, result, sigma, order=np.asarray(cal_ds.order))
+    head = np.asarray(cal_ds.tracker["position_mm"], dtype=float) * 1e-3
+    diag = diagnose(
+        model, cal, result, sigma, order=np.asarray(cal_ds.order), tracker_position_m=head
+    )
     progress.note(f"{diag.chosen}: {diag.reason}")
 
     after_values = result.values.copy()
@@ -124,6 +133,10 @@ def run(
     rms_before = float(
         np.sqrt(np.mean((cal.measured - model.predict(result.values, cal.commands).targets) ** 2))
     )
+    scale = float(diag.coefficients.get("tracker_scale", [0.0])[0])
+    # a tracker scale error stretches the readings about the head: predict it the same way
+    after_pred = after_pred + scale * (after_pred - head)
+    cal_after = cal_after + scale * (cal_after - head)
     rms_after = float(np.sqrt(np.mean((cal.measured - cal_after) ** 2)))
     for name, s in diag.scores.items():
         recorder.log_metric(f"heldout_rms_mm/{name}", "candidate", 0, s.heldout_rms_mm)

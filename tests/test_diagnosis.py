@@ -32,15 +32,18 @@ def setup():
     return nominal, params, truth, commands
 
 
-def _diagnose(setup, effects, seed=1):
+HEAD = (1.2, 0.0, 0.3)
+
+
+def _diagnose(setup, effects, seed=1, scale_error=0.0):
     nominal, params, truth, commands = setup
     rng = np.random.default_rng(seed)
-    tracker = Tracker(noise=TrackerNoise("gaussian", SIGMA, 0.0))
+    tracker = Tracker(HEAD, TrackerNoise("gaussian", SIGMA, 0.0), scale_error=scale_error)
     m = measure(truth, commands, tracker, rng, effects=effects)
     obs = Observations(commands, m.readings.mean(axis=2))
     model = CalibrationModel(nominal, params)
     result = identify(model, obs)
-    return diagnose(model, obs, result, SIGMA)
+    return diagnose(model, obs, result, SIGMA, tracker_position_m=np.array(HEAD))
 
 
 def test_no_effect_is_not_invented(setup):
@@ -72,3 +75,13 @@ def test_two_effects_at_once(setup):
     assert set(d.coefficients) == {"backlash", "thermal_growth"}
     # the thermal coefficient is the growth per pose: alpha * rate = 11.5e-6 * 0.25
     assert d.coefficients["thermal_growth"][0] == pytest.approx(11.5e-6 * 0.25, rel=0.05)
+
+
+def test_tracker_scale_error_hides_in_the_geometry(setup):
+    """A tracker scale error stretches every reading about the head: a rigid motion plus a
+    uniform scale of the machine, which the 54 joint positions absorb. The residual stays at
+    the noise and the diagnosis rightly invents nothing: only a reference length (a scale
+    bar, a laser interferometer) can reveal it, which the report must say, not hide."""
+    d = _diagnose(setup, [], scale_error=2e-5)  # 20 ppm: 24 um at 1.2 m
+    assert not d.excess and d.chosen == "none"
+    assert "tracker_scale" in d.scores
