@@ -107,6 +107,7 @@ class Diagnosis:
     chosen: str = "none"
     reason: str = ""
     coefficients: dict[str, np.ndarray] = field(default_factory=dict)  # effect parameters
+    structure: dict[str, float] = field(default_factory=dict)  # rank correlations
     geometry_correction: np.ndarray | None = None  # for the estimated geometric parameters
 
 
@@ -188,6 +189,7 @@ def diagnose(
     rms = float(np.sqrt(np.mean(r**2))) * 1e3
     scores = {name: score(name, [eff]) for name, eff in blocks.items()}
     common = dict(
+        structure=residual_structure(r, pred.targets, obs.commands, order),
         residual_rms_mm=rms,
         noise_floor_rms_mm=sigma_m * 1e3,
         chi2_p_value=p_value,
@@ -243,4 +245,26 @@ def effect_offsets(
         out += np.einsum(
             "nak,k->na", library[name].regressor(model, values, commands, order), theta
         )
+    return out
+
+
+def residual_structure(
+    r: np.ndarray, targets: np.ndarray, commands: np.ndarray, order: np.ndarray
+) -> dict[str, float]:
+    """Spearman rank correlation of each pose's residual size with where and when it was
+    measured: tool position x, y, z (space), mean actuator value (actuator coordinates) and
+    measurement order (time). Values near 0 mean no structure along that direction."""
+    size = np.sqrt(np.mean(r**2, axis=1))
+    centre = targets.mean(axis=1)
+    probes = {
+        "x": centre[:, 0],
+        "y": centre[:, 1],
+        "z": centre[:, 2],
+        "mean_actuator": commands.mean(axis=1),
+        "order": np.asarray(order, dtype=float),
+    }
+    out = {}
+    for name, v in probes.items():
+        rho = stats.spearmanr(size, v).statistic if np.ptp(v) > 0 else 0.0
+        out[name] = float(np.nan_to_num(rho))
     return out

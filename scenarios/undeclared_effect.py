@@ -154,6 +154,7 @@ def run(
         "diagnosed_effect": diag.chosen,
         "reason": diag.reason,
         "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
+        "residual_structure": diag.structure,
         "effect_parameters": {n: v.tolist() for n, v in diag.coefficients.items()},
         "test": {
             "before": _pose_stats(local, before_pred, test.measured),

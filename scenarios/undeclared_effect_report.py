@@ -21,6 +21,9 @@ def report(s: dict[str, Any]) -> str:
         "|---|---|",
         *[f"| {n} | {v:.5f} |" for n, v in s["candidates"].items()],
         "",
+        "Structure of the geometric residual (rank correlation of each pose's residual with): "
+        + ", ".join(f"{k} {v:+.2f}" for k, v in s.get("residual_structure", {}).items()),
+        "",
         f"With the effect added: residual {s['residual_rms_after_mm']:.4f} mm RMS.",
         "",
         "Test poses not used to fit (pose predicted from the commands against the measured one):",

@@ -30,6 +30,8 @@ def test_summary_contract_and_loop_closed(run):
     ):
         assert key in s
     assert set(s["diagnosed_effect"].split("+")) == {"backlash", "thermal_growth"}
+    assert set(s["residual_structure"]) == {"x", "y", "z", "mean_actuator", "order"}
+    assert all(-1.0 <= v <= 1.0 for v in s["residual_structure"].values())
     # the loop closes: the residual falls to the tracker noise ...
     assert s["residual_rms_before_mm"] > 2 * s["noise_floor_rms_mm"]
     assert s["residual_rms_after_mm"] < 1.1 * s["noise_floor_rms_mm"]
