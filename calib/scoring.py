@@ -63,3 +63,27 @@ def error_stats(errors: PoseErrors) -> ErrorStats:
         ori_std_deg=float(ori.std(ddof=1)) if ori.size > 1 else 0.0,
         n_poses=int(pos.size),
     )
+
+
+def pose_errors_between(
+    target_local: np.ndarray, reference_targets: np.ndarray, measured_targets: np.ndarray
+) -> PoseErrors:
+    """Errors of measured poses against reference poses, both fitted from targets (N, T, 3)
+    (e.g. the pose a model predicts for the commands against the one the tracker saw)."""
+    r_ref, p_ref = fit_rigid_transform(target_local, reference_targets)
+    r_meas, p_meas = fit_rigid_transform(target_local, measured_targets)
+    dp = p_meas - p_ref
+    angle = rotation_angle(np.swapaxes(r_ref, -1, -2) @ r_meas)
+    return PoseErrors(np.linalg.norm(dp, axis=-1), angle, dp)
+
+
+def max_mean_stats(errors: PoseErrors) -> dict[str, float]:
+    """Largest and mean position and orientation errors (the first paper's Table 5)."""
+    pos = errors.position * 1e3
+    ori = np.degrees(errors.orientation)
+    return {
+        "pos_max_mm": float(pos.max()),
+        "pos_mean_mm": float(pos.mean()),
+        "ori_max_deg": float(ori.max()),
+        "ori_mean_deg": float(ori.mean()),
+    }

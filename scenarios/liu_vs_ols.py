@@ -22,7 +22,7 @@ from calib.coarse import coarse_calibration
 from calib.compensation import twist_compensated_commands
 from calib.estimators.registry import make_estimator
 from calib.fine import estimate, fine_problem
-from calib.scoring import pose_errors
+from calib.scoring import max_mean_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png
 from scenarios.machine_setup import load_machine
@@ -58,17 +58,6 @@ PAPER = {
     "n_source_errors": 145,
     "n_identifiable": 54,
 }
-
-
-def _stats(errors) -> dict[str, float]:
-    pos = errors.position * 1e3
-    ori = np.degrees(errors.orientation)
-    return {
-        "pos_max_mm": float(pos.max()),
-        "pos_mean_mm": float(pos.mean()),
-        "ori_max_deg": float(ori.max()),
-        "ori_mean_deg": float(ori.mean()),
-    }
 
 
 def run(
@@ -144,7 +133,7 @@ def run(
         for stage, cmds in stage_cmds.items():
             true = forward_batch(truth, cmds).targets
             errs = pose_errors(poses, true, nominal.target_local())
-            layers[group][stage] = _stats(errs)
+            layers[group][stage] = max_mean_stats(errs)
             maps.setdefault(group, {})[stage] = (poses, errs)
 
     recorder.log_mechanism(nominal)

@@ -18,6 +18,7 @@ import numpy as np
 from calib.diagnosis import diagnose, effect_offsets
 from calib.identify import bind_dataset, identify
 from calib.model import CalibrationModel
+from calib.scoring import max_mean_stats, pose_errors_between
 from scenarios.config import Scenario, ScenarioError
 from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
@@ -25,8 +26,6 @@ from scenarios.recording import Recorder
 from scenarios.twin_datasets import measured_dataset, through_file
 from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
 from twin.kinematics_batch import forward_batch
-from twin.rigid_fit import fit_rigid_transform
-from twin.rotations import rotation_angle
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 
@@ -46,19 +45,6 @@ def _effects(scenario: Scenario) -> list:
             raise ScenarioError(f"{scenario.path}: unknown effect '{kind}'; known: {list(EFFECTS)}")
         out.append(EFFECTS[kind](**{k: v for k, v in entry.items() if k != "kind"}))
     return out
-
-
-def _pose_stats(local, predicted: np.ndarray, measured: np.ndarray) -> dict[str, float]:
-    r_p, p_p = fit_rigid_transform(local, predicted)
-    r_m, p_m = fit_rigid_transform(local, measured)
-    pos = np.linalg.norm(p_m - p_p, axis=1) * 1e3
-    ori = np.degrees(rotation_angle(np.swapaxes(r_p, -1, -2) @ r_m))
-    return {
-        "pos_max_mm": float(pos.max()),
-        "pos_mean_mm": float(pos.mean()),
-        "ori_max_deg": float(ori.max()),
-        "ori_mean_deg": float(ori.mean()),
-    }
 
 
 def run(
@@ -157,8 +143,8 @@ def run(
         "residual_structure": diag.structure,
         "effect_parameters": {n: v.tolist() for n, v in diag.coefficients.items()},
         "test": {
-            "before": _pose_stats(local, before_pred, test.measured),
-            "after": _pose_stats(local, after_pred, test.measured),
+            "before": max_mean_stats(pose_errors_between(local, before_pred, test.measured)),
+            "after": max_mean_stats(pose_errors_between(local, after_pred, test.measured)),
         },
         "runtime_s": time.perf_counter() - t0,
     }
