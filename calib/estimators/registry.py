@@ -20,6 +20,10 @@ ESTIMATORS: dict[str, Callable[..., Estimator]] = {
 
 
 def make_estimator(name: str, **options: Any) -> Estimator:
+    """A new estimator by name; ``options`` go to its constructor."""
     if name not in ESTIMATORS:
         raise ValueError(f"unknown estimator '{name}'; known: {sorted(ESTIMATORS)}")
-    return ESTIMATORS[name](**options)
+    try:
+        return ESTIMATORS[name](**options)
+    except TypeError as exc:
+        raise ValueError(f"bad options {sorted(options)} for estimator '{name}': {exc}") from exc
