@@ -1,10 +1,16 @@
-"""PNG figures for reports (matplotlib, Agg), each written atomically."""
+"""PNG figures for reports (matplotlib, Agg), each written atomically.
+
+Every function takes the output path and a title first, writes the PNG through a temporary
+file in the same folder (``os.replace``), so a failed write never leaves a partial figure
+behind nor destroys an older one, and returns the path written.
+"""
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -12,22 +18,138 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.colors import Normalize
+
+DPI = 110
+CMAP = "viridis"
+
+Panel = tuple[str, np.ndarray, np.ndarray]  # (name, xy_mm (N, 2), errors (N,))
 
 
-def save_png(fig, path: Path) -> Path:
+def save_png(fig: plt.Figure, path: Path) -> Path:
     """Write ``fig`` to ``path`` through a temporary file in the same folder, then close it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png.tmp")
     os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110)
+        fig.savefig(tmp, dpi=DPI, format="png")
         os.replace(tmp, path)
     finally:
         plt.close(fig)
         if os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def _finite_max(values: np.ndarray) -> float:
+    """The largest finite value, at least a tiny positive number (a usable colour scale)."""
+    v = np.asarray(values, dtype=float)
+    return max(float(np.max(v[np.isfinite(v)], initial=0.0)), 1e-12)
+
+
+def _draw_map(ax: plt.Axes, xy: np.ndarray, errors: np.ndarray, norm: Normalize, unit: str):
+    """Colour the nodes of one layer (filled contours under the nodes when they span an
+    area), ring and annotate the largest error; NaN nodes are grey crosses."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    e = np.asarray(errors, dtype=float).ravel()
+    if xy.shape[0] != e.shape[0]:
+        raise ValueError(f"{xy.shape[0]} node positions but {e.shape[0]} error values")
+    ok = np.isfinite(e)
+    pts = xy[ok]
+    spans_area = len(np.unique(pts, axis=0)) >= 4 and (
+        np.linalg.matrix_rank(pts - pts.mean(axis=0), tol=1e-9 * np.ptp(pts).clip(1e-12)) == 2
+    )
+    if spans_area and np.ptp(e[ok]) > 0:
+        levels = np.linspace(norm.vmin, norm.vmax, 15)
+        ax.tricontourf(*pts.T, e[ok], levels=levels, cmap=CMAP, norm=norm, extend="max", alpha=0.85)
+    size = float(np.clip(4000.0 / max(len(e), 1), 12.0, 140.0))
+    sc = ax.scatter(
+        pts[:, 0], pts[:, 1], c=e[ok], cmap=CMAP, norm=norm, s=size, edgecolors="k", lw=0.4
+    )
+    if not ok.all():
+        ax.scatter(xy[~ok, 0], xy[~ok, 1], marker="x", color="0.5", s=size, label="no value")
+        ax.legend(fontsize=7, loc="best")
+    if ok.any():  # ring the largest error; its label points into the map, not off it
+        k = int(np.flatnonzero(ok)[np.argmax(e[ok])])
+        right, up = xy[k] > np.median(pts, axis=0)
+        ax.scatter(*xy[k], s=size * 2.5, facecolors="none", edgecolors="red", lw=1.4)
+        ax.annotate(
+            f"max {e[k]:.4g} {unit}".strip(),
+            xy[k],
+            xytext=(-9 if right else 9, -9 if up else 9),
+            textcoords="offset points",
+            ha="right" if right else "left",
+            va="top" if up else "bottom",
+            fontsize=8,
+            color="red",
+            bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
+        )
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pad = 0.08 * max(float(np.max(hi - lo)), 1e-9)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)  # contours stick to the data: leave room for nodes
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.grid(alpha=0.25)
+    return sc
+
+
+def _unit(label: str) -> str:
+    """'position error (mm)' -> 'mm' (empty if the label carries no unit in brackets)."""
+    return label[label.rfind("(") + 1 : label.rfind(")")] if label.endswith(")") else ""
+
+
+def error_map_png(
+    path: Path,
+    title: str,
+    xy_mm: np.ndarray,
+    errors: np.ndarray,
+    label: str,
+    vmax: float | None = None,
+) -> Path:
+    """An error over the nodes of one layer: x, y of the nodes, colour = error (``label``
+    names the quantity and its unit, e.g. 'position error (mm)'), the maximum annotated."""
+    norm = Normalize(0.0, _finite_max(errors) if vmax is None else vmax)
+    fig, ax = plt.subplots(figsize=(6.0, 5.0), constrained_layout=True)
+    sc = _draw_map(ax, xy_mm, errors, norm, _unit(label))
+    fig.colorbar(sc, ax=ax, label=label, shrink=0.9)
+    ax.set_title(title, fontsize=10)
+    return save_png(fig, path)
+
+
+def error_maps_png(
+    path: Path,
+    title: str,
+    panels: Sequence[Panel],
+    label: str,
+    shared_scale: bool = True,
+) -> Path:
+    """Several layers or stages side by side (up to 4 a row); ``shared_scale`` puts them on
+    one colour scale from 0 to the largest error of all panels (before/after comparisons)."""
+    if not panels:
+        raise ValueError("error_maps_png needs at least one panel")
+    n = len(panels)
+    cols = min(n, 4)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(3.6 * cols + 1.3, 3.4 * rows + 0.6), squeeze=False
+    )
+    fig.set_layout_engine("constrained")
+    vmax = max(_finite_max(e) for _, _, e in panels)
+    for ax, (name, xy, errors) in zip(axes.flat, panels, strict=False):
+        norm = Normalize(0.0, vmax if shared_scale else _finite_max(errors))
+        sc = _draw_map(ax, xy, errors, norm, _unit(label))
+        ax.set_title(name, fontsize=9)
+        if not shared_scale:
+            fig.colorbar(sc, ax=ax, label=label, shrink=0.85)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    if shared_scale:
+        fig.colorbar(sc, ax=axes.ravel().tolist(), label=label, shrink=0.85)
+    fig.suptitle(title, fontsize=10)
+    return save_png(fig, path)
 
 
 def parameter_bars_png(
@@ -39,29 +161,26 @@ def parameter_bars_png(
     truth: np.ndarray | None = None,
     unit_label: str = "mm / deg",
 ) -> Path:
-    """Horizontal bars of estimates with +-2 std error bars and truth markers."""
+    """Horizontal bars of estimates with ±2 std error bars and truth markers; the figure
+    grows with the number of parameters so that 54+ names stay readable."""
     n = len(names)
-    fig, ax = plt.subplots(figsize=(7.5, 1.2 + 0.18 * n))
+    est = np.asarray(estimates, dtype=float)
+    if est.shape != (n,):
+        raise ValueError(f"{n} parameter names but estimates of shape {est.shape}")
+    fig, ax = plt.subplots(figsize=(7.5, 1.4 + 0.19 * n), constrained_layout=True)
     y = np.arange(n)
-    err = None if std is None else 2.0 * np.nan_to_num(np.asarray(std))
-    ax.barh(
-        y,
-        estimates,
-        xerr=err,
-        color="#4c78a8",
-        ecolor="#333333",
-        capsize=2,
-        label="estimate (+-2 std)",
-    )
+    err = None if std is None else 2.0 * np.nan_to_num(np.asarray(std, dtype=float))
+    label = "estimate" if std is None else "estimate ± 2 std"
+    ax.barh(y, est, xerr=err, color="#4c78a8", ecolor="#333333", capsize=2, label=label)
     if truth is not None:
-        ax.plot(truth, y, "o", color="#e45756", markersize=3, label="truth")
-    ax.set_yticks(y, names, fontsize=6)
-    ax.invert_yaxis()
+        ax.plot(truth, y, "D", color="#e45756", markersize=3.5, label="truth")
+    ax.set_yticks(y, names, fontsize=7 if n <= 60 else 6)
+    ax.set_ylim(n - 0.5, -0.5)
     ax.axvline(0.0, color="#999999", linewidth=0.6)
+    ax.grid(axis="x", alpha=0.3)
     ax.set_xlabel(unit_label)
     ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
+    ax.legend(fontsize=7, loc="best")
     return save_png(fig, path)
 
 
@@ -69,20 +188,61 @@ def index_vs_count_png(
     path: Path,
     title: str,
     counts: Sequence[int],
-    series: dict[str, Sequence[float]],
+    series: Mapping[str, Sequence[float]],
     ylabel: str,
     log_y: bool = True,
 ) -> Path:
-    """An observability index against the number of poses, one line per series."""
-    fig, ax = plt.subplots(figsize=(6.5, 4.0))
+    """An observability index against the number of poses, one line per method (a series
+    shorter than ``counts`` covers its first counts)."""
+    fig, ax = plt.subplots(figsize=(6.5, 4.0), constrained_layout=True)
     for label, values in series.items():
-        ax.plot(counts[: len(values)], values, marker=".", label=label)
+        ax.plot(list(counts)[: len(values)], values, marker=".", label=label)
     if log_y:
         ax.set_yscale("log")
     ax.set_xlabel("number of poses")
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    return save_png(fig, path)
+
+
+def _stats_label(label: str, v: np.ndarray) -> str:
+    if v.size == 0:
+        return f"{label}: no finite value"
+    std = float(np.std(v, ddof=1)) if v.size > 1 else 0.0
+    return f"{label}: n {v.size}, mean {np.mean(v):.4g}, std {std:.3g}"
+
+
+def histogram_png(
+    path: Path,
+    title: str,
+    values_by_label: Mapping[str, np.ndarray],
+    xlabel: str,
+    bins: int = 50,
+) -> Path:
+    """Overlaid histograms on common bins (e.g. Monte Carlo distributions of an estimate),
+    each labelled with its mean and standard deviation."""
+    data = {k: np.asarray(v, dtype=float).ravel() for k, v in values_by_label.items()}
+    data = {k: v[np.isfinite(v)] for k, v in data.items()}
+    everything = np.concatenate([v for v in data.values()] + [np.zeros(0)])
+    if everything.size == 0:
+        raise ValueError("histogram_png has no finite values to draw")
+    edges = np.histogram_bin_edges(everything, bins=bins)
+    fig, ax = plt.subplots(figsize=(6.5, 4.0), constrained_layout=True)
+    for label, v in data.items():
+        ax.hist(
+            v,
+            bins=edges,
+            alpha=0.5,
+            histtype="stepfilled",
+            edgecolor="k",
+            lw=0.4,
+            label=_stats_label(label, v),
+        )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("count")
+    ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
     return save_png(fig, path)

@@ -1,0 +1,134 @@
+"""Report figures: real PNG files, readable back, written atomically."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from scenarios import figures
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _grid(n: int = 7, half: float = 150.0) -> np.ndarray:
+    x, y = np.meshgrid(np.linspace(-half, half, n), np.linspace(-half, half, n))
+    return np.column_stack([x.ravel(), y.ravel()])
+
+
+def _read(path: Path) -> np.ndarray:
+    """Check the file is a PNG and return its pixels (H, W, channels)."""
+    assert path.is_file() and path.stat().st_size > 1000
+    assert path.read_bytes()[:8] == PNG_SIGNATURE
+    img = mpimg.imread(path)
+    assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100
+    assert np.ptp(img[..., :3]) > 0.5  # something is drawn, not a blank page
+    return img
+
+
+def _no_leftovers(folder: Path) -> None:
+    assert not [p for p in folder.iterdir() if p.name.startswith(".")]
+
+
+def test_error_map_png(tmp_path):
+    xy = _grid()
+    err = 0.01 + 1e-4 * np.hypot(*xy.T)
+    out = figures.error_map_png(
+        tmp_path / "map.png", "layer z = 220 mm", xy, err, "position error (mm)"
+    )
+    assert out == tmp_path / "map.png"
+    img = _read(out)
+    assert 0.9 < img.shape[1] / img.shape[0] < 1.5  # about as wide as tall (6 x 5 in)
+    _no_leftovers(tmp_path)
+
+
+def test_error_map_png_degenerate_layers(tmp_path):
+    # a single row of nodes (no area), a constant error, and a node without value
+    xy = np.column_stack([np.linspace(0, 100, 5), np.zeros(5)])
+    _read(figures.error_map_png(tmp_path / "a.png", "row", xy, np.full(5, 0.02), "e (mm)"))
+    err = np.linspace(0, 1, 49)
+    err[3] = np.nan
+    _read(figures.error_map_png(tmp_path / "b.png", "gap", _grid(), err, "e (mm)", vmax=2.0))
+    with pytest.raises(ValueError, match="49 node positions but 3"):
+        figures.error_map_png(tmp_path / "c.png", "bad", _grid(), np.ones(3), "e (mm)")
+    assert not (tmp_path / "c.png").exists()
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_error_maps_png_side_by_side(tmp_path, shared):
+    xy = _grid()
+    panels = [
+        ("before, z = 200", xy, 0.2 + 1e-3 * np.abs(xy[:, 0])),
+        ("after, z = 200", xy, 0.01 + 1e-5 * np.abs(xy[:, 1])),
+        ("before, z = 240", xy, 0.3 + 1e-3 * np.abs(xy[:, 1])),
+    ]
+    img = _read(
+        figures.error_maps_png(
+            tmp_path / "maps.png", "before / after", panels, "error (mm)", shared_scale=shared
+        )
+    )
+    assert img.shape[1] > 2 * img.shape[0]  # three panels in a row
+    with pytest.raises(ValueError, match="at least one panel"):
+        figures.error_maps_png(tmp_path / "none.png", "t", [], "e (mm)")
+
+
+def test_parameter_bars_png_grows_with_the_count(tmp_path):
+    rng = np.random.default_rng(0)
+    heights = {}
+    for n in (6, 54):
+        names = [f"leg{k // 9 + 1}.p{k % 9}" for k in range(n)]
+        est = rng.normal(0, 0.5, n)
+        img = _read(
+            figures.parameter_bars_png(
+                tmp_path / f"bars{n}.png",
+                f"{n} estimates",
+                names,
+                est,
+                std=np.abs(rng.normal(0, 0.05, n)),
+                truth=est + rng.normal(0, 0.05, n),
+            )
+        )
+        heights[n] = img.shape[0]
+    assert heights[54] > 3 * heights[6]
+    assert heights[54] / 54 > 15  # at least 15 px a name at 54 parameters
+    _read(figures.parameter_bars_png(tmp_path / "plain.png", "no std", ["a", "b"], [1.0, -1.0]))
+    with pytest.raises(ValueError, match="2 parameter names"):
+        figures.parameter_bars_png(tmp_path / "bad.png", "t", ["a", "b"], np.ones(3))
+
+
+def test_index_vs_count_png(tmp_path):
+    counts = list(range(9, 41))
+    series = {
+        "D-optimal": list(np.geomspace(1e-3, 1e-1, len(counts))),
+        "random": list(np.geomspace(1e-4, 3e-2, 20)),  # shorter: covers the first counts
+    }
+    img = _read(figures.index_vs_count_png(tmp_path / "idx.png", "O1", counts, series, "O1"))
+    assert img.shape[1] > img.shape[0]
+    _read(figures.index_vs_count_png(tmp_path / "lin.png", "t", counts, series, "O1", log_y=False))
+
+
+def test_histogram_png(tmp_path):
+    rng = np.random.default_rng(1)
+    values = {"OLS": rng.normal(0, 1.0, 2000), "Liu": rng.normal(0.1, 0.5, 2000)}
+    img = _read(figures.histogram_png(tmp_path / "h.png", "Monte Carlo", values, "dl (mm)"))
+    assert img.shape[1] > img.shape[0]
+    with pytest.raises(ValueError, match="no finite values"):
+        figures.histogram_png(tmp_path / "e.png", "t", {"a": np.array([np.nan])}, "x")
+
+
+def test_a_failing_write_keeps_the_existing_file(tmp_path, monkeypatch):
+    path = tmp_path / "keep.png"
+    figures.histogram_png(path, "first", {"a": np.arange(10.0)}, "x")
+    before = path.read_bytes()
+
+    def refuse(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", refuse)
+    with pytest.raises(OSError, match="disk full"):
+        figures.error_map_png(path, "second", _grid(), np.ones(49), "e (mm)")
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.png"]  # no temporary left
