@@ -10,30 +10,16 @@ with its standard error (mm, deg); ``--out`` writes the same as JSON (atomically
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from calib.atomic_files import write_json_atomic
 from calib.dataset import DatasetError, read_dataset
 from calib.exceptions import CalibError
 from calib.identify import bind_dataset, identify, model_from_files
 from twin.exceptions import TwinError
-
-
-def _write_json(path: Path, data: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -53,7 +39,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         tail = f"+- {s:.4f}" if est else "(not identifiable: kept at 0)"
         print(f"  {name:32s} {v:+10.4f} {u:3s} {tail}")
     if args.out:
-        _write_json(
+        write_json_atomic(
             Path(args.out),
             {
                 "model": model.nominal.name,
@@ -105,7 +91,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for name, score in diag.scores.items():
         print(f"  {name:24s} held-out RMS {score.heldout_rms_mm:.5f} mm, BIC {score.bic:.1f}")
     if args.out:
-        _write_json(
+        write_json_atomic(
             Path(args.out),
             {
                 "residual_rms_mm": diag.residual_rms_mm,

@@ -8,8 +8,6 @@ behind nor destroys an older one, and returns the path written.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -20,6 +18,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import Normalize
 
+from calib.atomic_files import write_with_atomic
+
 DPI = 110
 CMAP = "viridis"
 
@@ -27,19 +27,13 @@ Panel = tuple[str, np.ndarray, np.ndarray]  # (name, xy_mm (N, 2), errors (N,))
 
 
 def save_png(fig: plt.Figure, path: Path) -> Path:
-    """Write ``fig`` to ``path`` through a temporary file in the same folder, then close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png.tmp")
-    os.close(fd)
+    """Write ``fig`` to ``path`` atomically (a temporary sibling, then a rename), then close it."""
     try:
-        fig.savefig(tmp, dpi=DPI, format="png")
-        os.replace(tmp, path)
+        return write_with_atomic(
+            path, lambda tmp: fig.savefig(tmp, dpi=DPI, format="png"), suffix=".png.tmp"
+        )
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
 
 
 def _finite_max(values: np.ndarray) -> float:
