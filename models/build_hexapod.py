@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twin.mjcf_numbers import canonical_quat, fmt
+
 BASE_RADIUS = 0.180
 PLATFORM_RADIUS = 0.120
 BASE_ANGLES_DEG = (15.0, 105.0, 135.0, 225.0, 255.0, 345.0)
@@ -80,7 +82,7 @@ def leg_home(b: np.ndarray, p_world: np.ndarray, x_b: np.ndarray, x_p: np.ndarra
 def quat_wxyz(rot: np.ndarray) -> np.ndarray:
     w = np.sqrt(max(0.0, 1.0 + np.trace(rot))) / 2.0
     if w > 1e-6:
-        return np.array(
+        return canonical_quat(
             [
                 w,
                 (rot[2, 1] - rot[1, 2]) / (4 * w),
@@ -96,11 +98,7 @@ def quat_wxyz(rot: np.ndarray) -> np.ndarray:
     q[1 + i] = s / 4
     q[1 + j] = (rot[j, i] + rot[i, j]) / s
     q[1 + k] = (rot[k, i] + rot[i, k]) / s
-    return q if q[0] >= 0 else -q
-
-
-def fmt(v) -> str:
-    return " ".join(f"{float(x):.12g}" for x in np.atleast_1d(v))
+    return canonical_quat(q)
 
 
 def build_xml() -> str:

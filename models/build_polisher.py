@@ -48,6 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twin.mjcf_numbers import canonical_quat, fmt
+
 BETA = np.pi / 6
 BASE_RADIUS = 0.350
 PLATFORM_RADIUS = 0.135
@@ -101,11 +103,7 @@ def quat_wxyz(rot: np.ndarray) -> np.ndarray:
         q[1 + j] = (m[j, i] + m[i, j]) / s
         q[1 + k] = (m[k, i] + m[i, k]) / s
     q = np.array(q)
-    return q if q[0] >= 0 else -q
-
-
-def fmt(v) -> str:
-    return " ".join(f"{float(x):.12g}" for x in np.atleast_1d(v))
+    return canonical_quat(q)
 
 
 class Geometry:
@@ -518,7 +516,7 @@ def build_parameters() -> str:
             f'name = "{name}"',
             f'kind = "{kind}"',
             f'element = "{element}"',
-            f"axis = [{', '.join(f'{a:.12g}' for a in axis)}]",
+            f"axis = [{', '.join(fmt(axis).split())}]",
             "",
         ]
     return "\n".join(lines)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import mujoco
@@ -26,25 +25,6 @@ Y_P = (84.853, 115.911, 31.058, -31.058, -115.911, -84.853)
 L_B = L_P = 5.0  # mm, Han et al. 2019, Table 1
 HOME_LIMB = 230.715  # mm, Han et al. 2019, Table 1 (L_i at the home pose)
 HOME_POSE = np.array([0.0, 0.0, 0.220, 0.0, 0.0, 0.0])
-
-
-def _load_builder():
-    spec = importlib.util.spec_from_file_location(
-        "build_hexapod_under_test", ROOT / "models" / "build_hexapod.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-# ----------------------------------------------------------------------------- generator
-def test_committed_xml_equals_generator_output():
-    assert HEXAPOD_XML.read_text() == _load_builder().build_xml()
-
-
-def test_committed_params_equal_generator_output():
-    assert HEXAPOD_PARAMS.read_text() == _load_builder().build_parameters()
 
 
 # ----------------------------------------------------------------------------- Table 1
