@@ -43,7 +43,7 @@ class CalibrationModel:
         key = values.tobytes()
         if key != self._cache_key:
             model = self.params.inject(self.nominal.model, values)
-            self._cache_mech = Mechanism(model, name=self.nominal.name)
+            self._cache_mech = self.nominal.with_model(model)
             self._cache_key = key
         assert self._cache_mech is not None
         return self._cache_mech

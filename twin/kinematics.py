@@ -74,7 +74,7 @@ def newton_solve(
         r = closure_residual(mech)
         if goal is not None:
             r = np.concatenate([r, _tool_residual(mech, *goal)])
-        err = float(np.max(np.abs(r)))
+        err = float(np.max(np.abs(r))) if r.size else 0.0  # a serial chain: nothing to solve
         if not np.isfinite(err):
             break
         if err < TOLERANCE:

@@ -1,4 +1,6 @@
-"""Batched closed-chain forward kinematics: the same Newton as twin.kinematics, many poses.
+"""Batched forward kinematics: the same Newton as twin.kinematics, many poses.
+
+A serial chain (no free dof) needs no Newton: one kinematics pass per pose.
 
 ``mujoco.batch.Batch`` runs the kinematics and the site Jacobians of every pose on a thread
 pool; the Newton steps are solved for all poses at once with numpy. Each pose is checked
@@ -227,6 +229,8 @@ def forward_batch(
         raise ClosureError(f"start must be ({m.nq},) or ({n}, {m.nq}), got {q0.shape}")
     qpos = np.array(np.broadcast_to(q0, (n, m.nq)))
     qpos[:, mech.actuator_qpos] = commands
+    if mech.free_dofs().size == 0:
+        return _direct(mech, qpos)
     residual = np.full(n, np.inf)
     shapes = {
         "site_xpos": (m.nsite, 3),
@@ -269,6 +273,23 @@ def forward_batch(
         residual=residual,
         iterations=iterations,
     )
+
+
+def _direct(mech: Mechanism, qpos: np.ndarray) -> BatchSolution:
+    """Every joint commanded (a serial chain): one kinematics pass per pose, nothing to solve."""
+    m, n = mech.model, len(qpos)
+    tool_r, tool_p = np.zeros((n, 3, 3)), np.zeros((n, 3))
+    targets = np.zeros((n, mech.n_targets, 3))
+    for chunk in range(0, n, CHUNK):
+        ids = np.arange(chunk, min(n, chunk + CHUNK))
+        batch = Batch(m, nsim=len(ids), nthread=1)
+        bound = {f: batch.bind(f) for f in ("qpos", "site_xpos", "site_xmat")}
+        bound["qpos"][:] = qpos[ids]
+        batch.forward(stage=mujoco.mjtStage.mjSTAGE_POS)
+        tool_r[ids] = bound["site_xmat"][:, mech.tool_site].reshape(-1, 3, 3)
+        tool_p[ids] = bound["site_xpos"][:, mech.tool_site]
+        targets[ids] = bound["site_xpos"][:, mech.target_sites]
+    return BatchSolution(qpos, tool_r, tool_p, targets, np.zeros(n), 0)
 
 
 def _solve_chunk(

@@ -1,6 +1,9 @@
-"""One object wrapping a MuJoCo model of a closed-chain machine, for twin and calib alike.
+"""One object wrapping a MuJoCo model of a machine, for twin and calib alike.
 
-What it reads from the MJCF (and refuses to guess):
+Serial, parallel and hybrid machines are one kind of thing here: a serial chain is a
+mechanism with zero closure equations (every joint actuated, forward kinematics direct), a
+parallel or hybrid one has closures that fix its passive joints. What it reads from the
+MJCF (and refuses to guess):
 * actuators: every ``<actuator>`` entry drives one slide or hinge joint; its name is the
   actuator's name in datasets; the joint's value is the commanded value (metres/radians);
 * closures: every ``<equality>`` of type ``connect`` or ``weld`` between two *sites*
@@ -9,6 +12,10 @@ What it reads from the MJCF (and refuses to guess):
 * tool: the site ``tool``, whose pose inverse kinematics commands;
 * workspace: optional ``<numeric name="workspace_min|workspace_max">`` (x, y, z, rx, ry, rz);
 * home: keyframe ``home`` (start of every closure solve, which keeps one assembly branch).
+
+Kinematics needs no inertia. MuJoCo refuses moving bodies without mass, so a file that
+declares none is compiled with MuJoCo's own ``boundmass``/``boundinertia`` (1 g, 1e-6
+kg m^2) and ``masses_defaulted`` says so: a gravity effect on such masses is meaningless.
 """
 
 from __future__ import annotations
@@ -27,6 +34,26 @@ TARGET_PREFIX = "target_"
 SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 TOOL_SITE = "tool"
+BOUND_MASS = 1e-3  # kg, for bodies an MJCF gives no mass (kinematics-only models)
+BOUND_INERTIA = 1e-6  # kg m^2
+_NO_MASS = "mass and inertia of moving bodies must be larger than mjMINVAL"
+
+
+def compile_spec(spec: mujoco.MjSpec, where: str) -> tuple[mujoco.MjModel, bool]:
+    """Compile; if MuJoCo refuses bodies without mass, again with bounded defaults.
+
+    Returns the model and whether masses were defaulted."""
+    try:
+        return spec.compile(), False
+    except ValueError as exc:
+        if _NO_MASS not in str(exc):
+            raise ModelError(f"MuJoCo could not compile {where}: {exc}") from exc
+    spec.compiler.boundmass = BOUND_MASS
+    spec.compiler.boundinertia = BOUND_INERTIA
+    try:
+        return spec.compile(), True
+    except ValueError as exc:
+        raise ModelError(f"MuJoCo could not compile {where}: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -46,15 +73,19 @@ class Closure:
 class Mechanism:
     """A MuJoCo model plus the names calibration needs. Pure kinematics lives elsewhere."""
 
-    def __init__(self, model: mujoco.MjModel, name: str | None = None) -> None:
+    def __init__(
+        self, model: mujoco.MjModel, name: str | None = None, masses_defaulted: bool = False
+    ) -> None:
         self.model = model
         self.data = mujoco.MjData(model)
         self.name = name or model.names[: model.names.find(b"\0")].decode() or "model"
+        self.masses_defaulted = bool(masses_defaulted)
         self._read_actuators()
         self._read_closures()
         self._read_targets()
         self._read_home()
         self._read_workspace()
+        self._check_degrees_of_freedom()
 
     # ----------------------------------------------------------------- construction
     @classmethod
@@ -63,22 +94,30 @@ class Mechanism:
         if not path.is_file():
             raise ModelError(f"MJCF file not found: {path}")
         try:
-            model = mujoco.MjModel.from_xml_path(str(path))
+            spec = mujoco.MjSpec.from_file(str(path))
         except ValueError as exc:
             raise ModelError(f"MuJoCo could not compile {path}: {exc}") from exc
-        return cls(model, name=None)
+        model, defaulted = compile_spec(spec, str(path))
+        return cls(model, name=None, masses_defaulted=defaulted)
 
     @classmethod
     def from_xml_string(cls, xml: str) -> Mechanism:
         try:
-            model = mujoco.MjModel.from_xml_string(xml)
+            spec = mujoco.MjSpec.from_string(xml)
         except ValueError as exc:
             raise ModelError(f"MuJoCo could not compile the MJCF string: {exc}") from exc
-        return cls(model)
+        model, defaulted = compile_spec(spec, "the MJCF string")
+        return cls(model, masses_defaulted=defaulted)
 
     def copy(self) -> Mechanism:
         """An independent mechanism (own MjModel and MjData)."""
-        return Mechanism(copy.deepcopy(self.model), name=self.name)
+        return Mechanism(
+            copy.deepcopy(self.model), name=self.name, masses_defaulted=self.masses_defaulted
+        )
+
+    def with_model(self, model: mujoco.MjModel) -> Mechanism:
+        """The same machine on another model of it (e.g. with errors injected)."""
+        return Mechanism(model, name=self.name, masses_defaulted=self.masses_defaulted)
 
     # ----------------------------------------------------------------- reading names
     def _read_actuators(self) -> None:
@@ -124,8 +163,6 @@ class Mechanism:
                     "stores its anchor at compile time and silently absorbs injected errors"
                 )
             closures.append(Closure(name, kind, int(m.eq_obj1id[i]), int(m.eq_obj2id[i])))
-        if not closures:
-            raise ModelError(f"model '{self.name}' has no site-based connect/weld closure")
         self.closures: tuple[Closure, ...] = tuple(closures)
         self.n_closure = sum(c.size for c in closures)
 
@@ -168,7 +205,32 @@ class Mechanism:
             raise ModelError(f"<numeric name='{name}'> must hold {size} values, has {n}")
         return m.numeric_data[adr : adr + n].copy()
 
+    def _check_degrees_of_freedom(self) -> None:
+        """Forward kinematics must be determined: no more free dofs than closure equations."""
+        n_free = len(self.free_dofs())
+        if n_free > self.n_closure:
+            m = self.model
+            joints = sorted(
+                {
+                    mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.dof_jntid[d]))
+                    or f"joint{int(m.dof_jntid[d])}"
+                    for d in self.free_dofs()
+                }
+            )
+            what = "has no closure" if self.n_closure == 0 else f"has {self.n_closure} closure"
+            raise ModelError(
+                f"model '{self.name}' {what} equation(s) for {n_free} unactuated degree(s) of "
+                f"freedom (joints {joints}): forward kinematics is undetermined. A serial "
+                "chain needs an <actuator> on every joint; a closed chain, site-based "
+                "<connect>/<weld> closures that fix its passive joints"
+            )
+
     # ----------------------------------------------------------------- helpers
+    @property
+    def is_serial(self) -> bool:
+        """No closures: forward kinematics is direct."""
+        return self.n_closure == 0
+
     @property
     def n_actuators(self) -> int:
         return len(self.actuator_names)

@@ -6,7 +6,9 @@ the closed chain: with the actuators held, the closure c(q, pi) = 0 defines q(pi
 
     dq/dpi = -(dc/dq)^+ dc/dpi,      dy/dpi = (dy/dq) dq/dpi + (dy/dpi)_explicit
 
-for the target positions y. Tests compare it with finite differences of the full solve.
+for the target positions y. A serial chain has no closure and no free dof: the implicit part
+vanishes and dy/dpi is the explicit term alone. Tests compare it with finite differences of
+the full solve.
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ def _implicit(
     nc = len(a)
     c_pi = stack_closure_rows(mech, dp[:nc] - dp[nc : 2 * nc], dw[:nc] - dw[nc : 2 * nc])
     free = mech.free_dofs()
+    if free.size == 0:  # a serial chain, or closures that leave nothing free
+        return np.zeros((0, len(params))), free, dp[2 * nc :], dw[2 * nc :]
     c_q = closure_jacobian(mech)[:, free]
     if c_q.shape[0] == c_q.shape[1]:
         dq = np.linalg.solve(c_q, -c_pi)
@@ -54,7 +58,7 @@ def target_jacobian(
     """
     dq, free, dp, _ = _implicit(mech, params, values, qpos, mech.target_sites)
     jp, _ = site_jacobians(mech, mech.target_sites)
-    y_q = jp[:, :, free].reshape(-1, len(free))
+    y_q = jp[:, :, free].reshape(3 * len(mech.target_sites), len(free))
     return y_q @ dq + dp.reshape(-1, len(params))
 
 

@@ -39,7 +39,7 @@ class GravityCompliance:
         model = copy.deepcopy(mech.model)
         model.opt.gravity[:] = self.gravity
         model.body_mass[mech.tool_body] += self.payload_kg
-        return Mechanism(model, name=mech.name)
+        return mech.with_model(model)
 
     def actuator_forces(self, mech: Mechanism, qpos: np.ndarray) -> np.ndarray:
         """Forces (N) the actuators exert to hold the machine still at ``qpos``."""
