@@ -6,7 +6,17 @@ import argparse
 import sys
 from pathlib import Path
 
+from calib.exceptions import CalibError, DatasetError
 from scenarios.config import SCENARIO_DIR, ScenarioError
+from twin.exceptions import TwinError
+
+
+def _shown(path: Path) -> str:
+    """``results/<name>`` relative to the working directory when it lies below it."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -24,9 +34,9 @@ def main(argv: list[str] | None = None) -> int:
         for f in sorted(SCENARIO_DIR.glob("*.toml")):
             print(f.stem)
         return 0
-    from scenarios.runner import run_scenario
-
     try:
+        from scenarios.runner import run_scenario
+
         summary, out_dir = run_scenario(
             args.scenario,
             args.results,
@@ -37,6 +47,16 @@ def main(argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except (TwinError, CalibError, DatasetError) as exc:
+        # a valid file asking for something the machine cannot do (a pose outside the
+        # workspace, a rank-deficient plan): named, without a traceback; results untouched
+        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt as exc:
+        where = getattr(exc, "out_dir", None)
+        shown = f"{_shown(where)} left as it was" if where is not None else "nothing written"
+        print(f"interrupted: {shown}", file=sys.stderr)
+        return 130
     print(f"{out_dir / 'summary.json'} (runtime {summary.get('runtime_s', float('nan')):.1f} s)")
     return 0
 

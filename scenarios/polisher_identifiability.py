@@ -19,11 +19,10 @@ from calib.model import CalibrationModel
 from calib.reconstruction import correlation_reconstruction, spectral_reconstruction
 from calib.screw_polisher import PolisherScrewModel
 from scenarios.config import Scenario
+from scenarios.machine_setup import load_nominal
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics import forward
-from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.workspace import commands_for_poses, layer_poses
 
 # The paper's Table 2: irreducible parameters per limb (54 in all).
@@ -104,8 +103,7 @@ def run(
     scenario: Scenario, out_dir: Path, progress: Progress, recorder: Recorder
 ) -> dict[str, Any]:
     t0 = time.perf_counter()
-    nominal = Mechanism.from_xml(scenario.resolve(scenario.get("model", str)))
-    params = load_parameter_set(scenario.resolve(scenario.get("error_model", str)), nominal.model)
+    nominal, params = load_nominal(scenario)
     model = CalibrationModel(nominal, params)
     heights = [h * 1e-3 for h in scenario.get("plan.layer_heights_mm", list)]
     nodes = scenario.get("plan.nodes_per_side", int)

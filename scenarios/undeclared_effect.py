@@ -19,32 +19,14 @@ from calib.diagnosis import diagnose, effect_offsets
 from calib.identify import bind_dataset, identify
 from calib.model import CalibrationModel
 from calib.scoring import max_mean_stats, pose_errors_between
-from scenarios.config import Scenario, ScenarioError
-from scenarios.machine_setup import load_machine
+from scenarios.config import Scenario
+from scenarios.machine_setup import build_effects, load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.twin_datasets import measured_dataset, through_file
-from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
 from twin.kinematics_batch import forward_batch
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
-
-EFFECTS = {
-    "thermal_growth": ThermalGrowth,
-    "backlash": Backlash,
-    "lead_error": LeadError,
-    "gravity_compliance": GravityCompliance,
-}
-
-
-def _effects(scenario: Scenario) -> list:
-    out = []
-    for entry in scenario.get("truth.effects", list, []):
-        kind = entry.get("kind")
-        if kind not in EFFECTS:
-            raise ScenarioError(f"{scenario.path}: unknown effect '{kind}'; known: {list(EFFECTS)}")
-        out.append(EFFECTS[kind](**{k: v for k, v in entry.items() if k != "kind"}))
-    return out
 
 
 def run(
@@ -54,7 +36,7 @@ def run(
     rng = np.random.default_rng(scenario.get("seed", int))
     machine = load_machine(scenario, rng)
     nominal, params, truth = machine.nominal, machine.params, machine.truth
-    effects = _effects(scenario)
+    effects = build_effects(scenario)
     sigma = scenario.get("tracker.sigma_mm", float) * 1e-3
     tracker = Tracker(
         position_m=tuple(
