@@ -141,6 +141,12 @@ class Dataset:
         return int(self.readings.shape[2])
 
     @property
+    def pose_labels(self) -> tuple[str, ...]:
+        """The pose ids as strings, to name poses in errors (e.g. the ``labels`` of
+        :func:`twin.workspace.check_command_strokes`), never their row index."""
+        return tuple(str(int(i)) for i in self.pose_ids)
+
+    @property
     def measured(self) -> NDArray[np.float64]:
         """Mean over repeats, (P, T, 3) metres."""
         return self.readings.mean(axis=2)

@@ -1,7 +1,10 @@
 """CSV + JSON sidecar reading and writing for :mod:`calib.dataset`.
 
 File units are millimetres and degrees; the returned :class:`~calib.dataset.Dataset`
-is SI. Both files are written atomically (temporary sibling, then ``os.replace``).
+is SI. Both files are written atomically (temporary sibling, then ``os.replace``), with the
+mode of an ordinary file (0644 less the umask). Both are read as UTF-8 (a UTF-8 byte-order
+mark is accepted); another encoding, another delimiter than ',' or a malformed cell raises
+:class:`~calib.dataset.DatasetError` naming the file, line and column.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from calib.atomic_files import ordinary_mode
 from calib.dataset import (
     ACTUATOR_UNITS,
     FORMAT,
@@ -28,6 +32,7 @@ from calib.dataset import (
     check_names,
     sidecar_path,
 )
+from twin.parameter_file import closest, read_utf8
 
 CMD_PREFIX = "cmd:"
 REQUIRED_COLUMNS = ("pose_id", "set", "target", "repeat", "x_mm", "y_mm", "z_mm")
@@ -60,7 +65,10 @@ def _json_default(obj: Any) -> Any:
 
 
 def _atomic_write(files: Sequence[tuple[Path, str]]) -> None:
-    """Write every file to a temporary sibling first, then ``os.replace`` each in turn."""
+    """Write every file to a temporary sibling first, then ``os.replace`` each in turn.
+
+    The files get the mode of an ordinary new file (0644 less the umask), also when they
+    replace an existing file."""
     temps: list[tuple[str, Path]] = []
     try:
         for target, text in files:
@@ -70,7 +78,7 @@ def _atomic_write(files: Sequence[tuple[Path, str]]) -> None:
                 fh.write(text)
                 fh.flush()
                 os.fsync(fh.fileno())
-            os.chmod(tmp, target.stat().st_mode & 0o777 if target.exists() else 0o644)
+            os.chmod(tmp, ordinary_mode())  # 0644 less umask, like open(); not mkstemp's 0600
         for tmp, target in temps:
             os.replace(tmp, target)
     finally:
@@ -123,13 +131,47 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
     return path
 
 
-def _read_sidecar(path: Path) -> dict[str, Any]:
+_DELIMITERS = {";": "';'", "\t": "tab ('\\t')", "|": "'|'"}
+
+
+def _read_text(path: Path, what: str) -> str:
+    """The UTF-8 text of a dataset file (a UTF-8 byte-order mark is accepted)."""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: sidecar file not found (expected '<csv path>.json')") from None
+        return read_utf8(path)
+    except UnicodeError as exc:
+        raise DatasetError(f"{path}: cannot read the {what}: {exc}") from None
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+
+
+def _other_delimiter(fields: Sequence[str]) -> str | None:
+    """The delimiter a line split on commas into ``fields`` seems to use instead, if any."""
+    if len(fields) != 1:
+        return None
+    counts = {d: fields[0].count(d) for d in _DELIMITERS}
+    best = max(counts, key=lambda d: counts[d])
+    return best if counts[best] else None
+
+
+def _delimiter_message(delimiter: str) -> str:
+    return (
+        f"the file uses {_DELIMITERS[delimiter]} as delimiter; the format is comma-separated "
+        "(fields separated by ',', '.' as decimal point)"
+    )
+
+
+def _read_sidecar(path: Path) -> dict[str, Any]:
+    if not path.exists():
+        raise DatasetError(f"{path}: sidecar file not found (expected '<csv path>.json')")
+    text = _read_text(path, "sidecar")
+    if not text.strip():
+        raise DatasetError(f"{path}: empty sidecar file (expected a JSON object)")
+    try:
+        data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path}: malformed JSON: {exc}") from None
+        raise DatasetError(
+            f"{path}: malformed JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+        ) from None
     if not isinstance(data, dict):
         raise DatasetError(f"{path}: the sidecar must be a JSON object")
     if data.get("format") != FORMAT:
@@ -139,7 +181,8 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
     missing = [k for k in (*_SIDECAR_REQUIRED, "actuators", "targets") if k not in data]
     unknown = sorted(set(data) - _SIDECAR_KEYS)
     if missing or unknown:
-        raise DatasetError(f"{path}: missing keys {missing}, unknown keys {unknown}")
+        hints = "".join(f"; {k!r}{closest(k, _SIDECAR_KEYS - set(data))}" for k in unknown)
+        raise DatasetError(f"{path}: missing keys {missing}, unknown keys {unknown}{hints}")
     for key, want in (("length_unit", "mm"), ("angle_unit", "deg")):
         if data[key] != want:
             raise DatasetError(f"{path}: {key} is {data[key]!r}, expected {want!r}")
@@ -191,6 +234,8 @@ def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[st
 
 def _number(loc: str, column: str, text: str, integer: bool = False) -> float:
     try:
+        if "_" in text:  # Python would read "1_000" as 1000: not a number in a CSV file
+            raise ValueError(text)
         value = int(text) if integer else float(text)
     except ValueError:
         kind = "an integer" if integer else "a number"
@@ -218,7 +263,9 @@ def _group_rows(
     for n, (line, row) in enumerate(rows, start=1):
         loc = f"{path} line {line} (data row {n})"
         if len(row) != len(col):
-            raise DatasetError(f"{loc}: {len(row)} fields, the header has {len(col)}")
+            delimiter = _other_delimiter(row)
+            hint = "" if delimiter is None else f" ({_delimiter_message(delimiter)})"
+            raise DatasetError(f"{loc}: {len(row)} fields, the header has {len(col)}{hint}")
         cell = {h: row[i].strip() for h, i in col.items()}
         pid = int(_number(loc, "pose_id", cell["pose_id"], integer=True))
         rep = int(_number(loc, "repeat", cell["repeat"], integer=True))
@@ -279,13 +326,22 @@ def read_csv_dataset(
             f"{sidecar_path(path)}: model is {side['model']!r}, expected {expected_model!r}"
         )
     acts, targets = list(side["actuators"]), list(side["targets"])
-    with path.open(encoding="utf-8-sig", newline="") as fh:
-        reader = csv.reader(fh)
-        header = [h.strip() for h in next(reader, [])]
-        if not header:
+    reader = csv.reader(io.StringIO(_read_text(path, "dataset CSV"), newline=""))
+    try:
+        header: list[str] = []
+        for first in reader:  # the first line that is not blank
+            header = [h.strip() for h in first]
+            if any(header):
+                break
+        if not any(header):
             raise DatasetError(f"{path}: empty file (no header and no data rows)")
+        delimiter = _other_delimiter(header)
+        if delimiter is not None:
+            raise DatasetError(f"{path} line {reader.line_num}: {_delimiter_message(delimiter)}")
         col = _columns(path, header, acts)
         rows = [(reader.line_num, r) for r in reader if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise DatasetError(f"{path} line {reader.line_num}: not readable as CSV: {exc}") from None
     if not rows:
         raise DatasetError(f"{path}: no data rows")
     pose_cols = ["set", *(CMD_PREFIX + a for a in acts)]

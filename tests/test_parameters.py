@@ -415,3 +415,23 @@ def test_non_numeric_axis_names_the_parameter(tmp_path, hexapod):
     )
     with pytest.raises(ParameterError, match=r"'p'"):
         load_parameter_set(path, hexapod.model)
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        ((5, "body_pos", "leg1_base", (1.0, 0.0, 0.0)), r"parameter name must be a non-empty"),
+        (("p", "body_pos", None, (1.0, 0.0, 0.0)), r"'p': element must be a non-empty string"),
+        (("p", "body_rott", "leg1_base", (1.0, 0.0, 0.0)), r"did you mean 'body_rot'\?"),
+        (("p", "body_pos", "leg1_base", ("1", 0.0, 0.0)), r"'p': axis .* must be 3 numbers"),
+        (("p", "body_pos", "leg1_base", (True, 0.0, 0.0)), r"'p': axis .* must be 3 numbers"),
+        (("p", "body_pos", "leg1_base", 1.0), r"'p': axis 1.0 must be 3 numbers"),
+    ],
+)
+def test_parameter_fields_of_the_wrong_type(args, match):
+    with pytest.raises(ParameterError, match=match):
+        Parameter(*args)
+
+
+def test_numpy_axis_is_accepted():
+    assert Parameter("p", "body_pos", "leg1_base", tuple(np.eye(3)[0])).axis == (1.0, 0.0, 0.0)

@@ -18,6 +18,7 @@ point ``p`` carried by it moves by ``t + w x (p - o)`` and its frame turns by ``
 from __future__ import annotations
 
 import copy
+import difflib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -42,12 +43,35 @@ class Parameter:
     axis: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ParameterError(f"parameter name must be a non-empty string, got {self.name!r}")
+        for field in ("kind", "element"):
+            value = getattr(self, field)
+            if not isinstance(value, str) or not value:
+                raise ParameterError(
+                    f"parameter '{self.name}': {field} must be a non-empty string, got {value!r}"
+                )
         if self.kind not in KINDS:
-            raise ParameterError(f"parameter '{self.name}': kind '{self.kind}' not in {KINDS}")
-        if len(tuple(self.axis)) != 3:
+            near = difflib.get_close_matches(self.kind, KINDS, n=1)
+            hint = f" (did you mean '{near[0]}'?)" if near else ""
+            raise ParameterError(
+                f"parameter '{self.name}': kind '{self.kind}' not in {KINDS}{hint}"
+            )
+        try:
+            axis = tuple(self.axis)
+        except TypeError:
+            raise ParameterError(
+                f"parameter '{self.name}': axis {self.axis!r} must be 3 numbers"
+            ) from None
+        if len(axis) != 3:
             raise ParameterError(
                 f"parameter '{self.name}': axis {self.axis} must have 3 components"
             )
+        if any(
+            isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.number))
+            for x in axis
+        ):
+            raise ParameterError(f"parameter '{self.name}': axis {self.axis!r} must be 3 numbers")
         if self.kind != "joint_zero":
             n = float(np.linalg.norm(self.axis))
             if not np.isclose(n, 1.0, atol=1e-9):

@@ -7,6 +7,8 @@ the nominal inverse kinematics keeps every actuator inside its stroke.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from twin.exceptions import ClosureError, WorkspaceError
@@ -24,6 +26,23 @@ def workspace_box(mech: Mechanism) -> tuple[np.ndarray, np.ndarray]:
     return mech.workspace_min, mech.workspace_max
 
 
+def _pose_name(i: int, labels: Sequence[object] | None) -> str:
+    """How messages name pose ``i``: its dataset ``pose_id`` when labels are given."""
+    return f"pose {i}" if labels is None else f"pose_id {labels[i]}"
+
+
+def _check_labels(labels: Sequence[object] | None, n: int) -> None:
+    if labels is not None and len(labels) != n:
+        raise ValueError(f"{len(labels)} pose labels for {n} poses")
+
+
+def _actuator_value(mech: Mechanism, k: int, value: float) -> tuple[str, str]:
+    """A command (SI) in the units of files: mm for prismatic, deg for revolute actuators."""
+    if mech.actuator_is_slide[k]:
+        return f"{value * 1e3:.6g}", "mm"
+    return f"{np.degrees(value):.6g}", "deg"
+
+
 def check_pose_in_box(mech: Mechanism, pose: np.ndarray, tol: float = 1e-12) -> None:
     """Raise WorkspaceError naming the axis when ``pose`` leaves the workspace box."""
     lo, hi = workspace_box(mech)
@@ -37,17 +56,65 @@ def check_pose_in_box(mech: Mechanism, pose: np.ndarray, tol: float = 1e-12) -> 
             )
 
 
-def commands_for_poses(mech: Mechanism, poses: np.ndarray) -> np.ndarray:
-    """Commands (N, A) for poses (N, 6): box check, IK, stroke check; errors name the pose."""
+def stroke_problem(mech: Mechanism, commands: np.ndarray, tol: float = 1e-12) -> str | None:
+    """Why commands (A,) (SI) leave a stroke, in mm or deg (the units of files); None if not."""
+    c = np.asarray(commands, dtype=float)
+    lo, hi = mech.actuator_range[:, 0], mech.actuator_range[:, 1]
+    for k in np.flatnonzero(~np.isfinite(c) | (c < lo - tol) | (c > hi + tol)):
+        k = int(k)
+        value, unit = _actuator_value(mech, k, c[k])
+        if not np.isfinite(c[k]):
+            return f"actuator '{mech.actuator_names[k]}' command is {value}"
+        low, _ = _actuator_value(mech, k, lo[k])
+        high, _ = _actuator_value(mech, k, hi[k])
+        what = "stroke" if mech.actuator_is_slide[k] else "range"
+        return (
+            f"actuator '{mech.actuator_names[k]}' command {value} {unit} is outside its "
+            f"{what} [{low}, {high}] {unit}"
+        )
+    return None
+
+
+def check_command_strokes(
+    mech: Mechanism, commands: np.ndarray, labels: Sequence[object] | None = None
+) -> None:
+    """Raise WorkspaceError unless every command row (N, A) (SI) lies inside the strokes.
+
+    The message names the pose (``labels[i]``, e.g. a dataset's ``pose_id``, or else its row
+    index), the actuator and the values in mm or deg."""
+    c = np.atleast_2d(np.asarray(commands, dtype=float))
+    if c.ndim != 2 or c.shape[1] != mech.n_actuators:
+        raise WorkspaceError(
+            f"expected {mech.n_actuators} actuator commands {mech.actuator_names} per pose, "
+            f"got shape {c.shape}"
+        )
+    _check_labels(labels, len(c))
+    for i, row in enumerate(c):
+        problem = stroke_problem(mech, row)
+        if problem:
+            raise WorkspaceError(f"{_pose_name(i, labels)}: {problem}")
+
+
+def commands_for_poses(
+    mech: Mechanism, poses: np.ndarray, labels: Sequence[object] | None = None
+) -> np.ndarray:
+    """Commands (N, A) for poses (N, 6): box check, IK, stroke check; errors name the pose.
+
+    ``labels`` (one per pose, e.g. a dataset's ``pose_id`` values) name the poses in errors;
+    without them a pose is named by its row index. Values are shown in mm and deg."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    _check_labels(labels, len(poses))
     out = np.empty((len(poses), mech.n_actuators))
     q = None
     for i, p in enumerate(poses):
         try:
             check_pose_in_box(mech, p)
-            sol = inverse(mech, p, start=q)
+            sol = inverse(mech, p, start=q, check_stroke=False)
+            problem = stroke_problem(mech, sol.actuators)
+            if problem:
+                raise WorkspaceError(f"not reachable: {problem}")
         except (WorkspaceError, ClosureError) as exc:
-            raise type(exc)(f"pose {i}: {exc}") from None
+            raise type(exc)(f"{_pose_name(i, labels)}: {exc}") from None
         out[i] = sol.actuators
         q = sol.qpos
     return out
