@@ -203,16 +203,18 @@ def test_numpy_jacobian_equals_mujoco_jacobian(hexapod, reachable):
 
 # ----------------------------------------------------------------------------- user errors
 def test_command_outside_the_stroke_names_the_actuator(hexapod):
-    with pytest.raises(WorkspaceError, match=r"actuator 'leg3' command 0\.3 .*outside its stroke"):
+    with pytest.raises(
+        WorkspaceError, match=r"actuator 'leg3' command 300 mm .*outside its stroke \[195, 265\] mm"
+    ):
         forward(hexapod, np.array([0.23, 0.23, 0.30, 0.23, 0.23, 0.23]))
-    with pytest.raises(WorkspaceError, match=r"actuator 'leg5' .*\[0\.195, 0\.265\]"):
+    with pytest.raises(WorkspaceError, match=r"actuator 'leg5' command 190 mm .*\[195, 265\] mm"):
         forward(hexapod, np.array([0.23, 0.23, 0.23, 0.23, 0.19, 0.23]))
 
 
 def test_batch_command_outside_the_stroke_names_pose_and_actuator(hexapod, reachable):
     commands = reachable[1][:4].copy()
     commands[2, 5] = 0.27
-    with pytest.raises(WorkspaceError, match=r"pose 2: actuator 'leg6' command 0\.27"):
+    with pytest.raises(WorkspaceError, match=r"pose 2: actuator 'leg6' command 270 mm"):
         forward_batch(hexapod, commands)
 
 

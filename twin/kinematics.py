@@ -122,10 +122,12 @@ def check_commands(mech: Mechanism, commands: np.ndarray, stroke: bool = True) -
     bad = np.flatnonzero((c < lo - 1e-12) | (c > hi + 1e-12))
     if bad.size:
         k = int(bad[0])
-        what = "stroke" if mech.actuator_is_slide[k] else "range"
+        slide = bool(mech.actuator_is_slide[k])
+        what, unit = ("stroke", "mm") if slide else ("range", "deg")
+        show = (lambda v: v * 1e3) if slide else np.degrees  # the units of files
         raise WorkspaceError(
-            f"actuator '{mech.actuator_names[k]}' command {c[k]:.6g} is outside its {what} "
-            f"[{lo[k]:.6g}, {hi[k]:.6g}]"
+            f"actuator '{mech.actuator_names[k]}' command {show(c[k]):.6g} {unit} is outside "
+            f"its {what} [{show(lo[k]):.6g}, {show(hi[k]):.6g}] {unit}"
         )
     return c
 

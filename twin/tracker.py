@@ -14,7 +14,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from twin.rotations import matrix_from_rotvec
+from twin.rotations import matrix_from_rotvec, matrix_from_rpy
 
 Array = NDArray[np.float64]
 
@@ -186,6 +186,9 @@ class Tracker:
     noise: TrackerNoise = field(default_factory=_default_tracker_noise)
     scale_error: float = 0.0
     repeats: int = 1
+    # orientation of the tracker's own frame in the base frame (R = Rz Ry Rx of these), for
+    # readings reported in the tracker's frame (its origin is the head)
+    rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         pos = tuple(float(v) for v in np.asarray(self.position_m, dtype=float).reshape(-1))
@@ -203,6 +206,20 @@ class Tracker:
         if self.repeats < 1:
             raise ValueError(f"repeats must be >= 1, got {self.repeats}")
         object.__setattr__(self, "repeats", int(self.repeats))
+        rpy = tuple(float(v) for v in np.asarray(self.rotation_rpy_rad, dtype=float).reshape(-1))
+        if len(rpy) != 3 or not all(math.isfinite(v) for v in rpy):
+            raise ValueError(f"rotation_rpy_rad must be 3 finite angles, got {rpy!r}")
+        object.__setattr__(self, "rotation_rpy_rad", rpy)
+
+    @property
+    def base_from_tracker(self) -> tuple[Array, Array]:
+        """(R, t) with p_base = R p_tracker + t: the tracker's pose in the base frame."""
+        return matrix_from_rpy(np.array(self.rotation_rpy_rad)), np.array(self.position_m)
+
+    def in_own_frame(self, points_base: ArrayLike) -> Array:
+        """Base-frame points (..., 3) as this tracker reports them in its own frame."""
+        rot, t = self.base_from_tracker
+        return (np.asarray(points_base, dtype=float) - t) @ rot
 
     def _points(self, points: ArrayLike) -> Array:
         x = np.asarray(points, dtype=float)
