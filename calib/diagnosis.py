@@ -10,6 +10,9 @@
    geometric estimate) and judged on held-out poses (k-fold cross-validation) and by BIC; the
    best is chosen only if the noise test fails, it lowers the held-out error and BIC prefers
    it. Otherwise the answer is "none": nothing is forced.
+
+Only the readings the identification kept enter (``IdentificationResult.rejected`` lists the
+gross outliers it left out): an outlier is not an effect.
 """
 
 from __future__ import annotations
@@ -149,27 +152,32 @@ def diagnose(
 ) -> Diagnosis:
     """Diagnose the residual of a geometric calibration ``result`` on ``obs``.
 
+    Only the readings the identification kept are used: those in ``result.rejected`` (gross
+    outliers) weigh nothing in any fit or score, so an outlier is never read as an effect.
+
     With ``tracker_position_m`` (the head in the base frame, from the dataset's sidecar) the
     library also holds a scale error of the tracker: readings stretched about its head."""
     n_poses = len(obs.commands)
     order = np.arange(n_poses) if order is None else np.asarray(order)
     values = result.values
     pred = model.predict(values, obs.commands)
-    r = (obs.measured - pred.targets).reshape(n_poses, -1)  # (N, T*3)
-    n = r.size
+    keep = kept_rows(result, obs.measured.shape[:2])  # (N, T*3)
+    r = (obs.measured - pred.targets).reshape(n_poses, -1) * keep  # (N, T*3)
+    n = int(keep.sum())
     p = int(result.estimated.sum())
     chi2 = float(np.sum(r**2) / sigma_m**2)
     p_value = float(stats.chi2.sf(chi2, max(n - p, 1)))
     excess = p_value < alpha
-    geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p)
+    rows = keep[:, :, None]  # a rejected reading's rows are zero in every regressor
+    geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p) * rows
     j_act = actuator_jacobians(model, values, pred.qpos)  # (N, T*3, A)
     blocks = {"none": np.zeros((n_poses, r.shape[1], 0))}
     for c in candidates or default_candidates(model.nominal.actuator_names):
         d = c.regressor(model, values, obs.commands, order)  # (N, A, k)
-        blocks[c.name] = np.einsum("nra,nak->nrk", j_act, d)
+        blocks[c.name] = np.einsum("nra,nak->nrk", j_act, d) * rows
     if tracker_position_m is not None:
         lever = pred.targets - np.asarray(tracker_position_m, dtype=float)  # (N, T, 3)
-        blocks["tracker_scale"] = lever.reshape(n_poses, -1, 1)
+        blocks["tracker_scale"] = lever.reshape(n_poses, -1, 1) * rows
     fold_of = np.arange(n_poses) % folds
 
     def score(name: str, extra: list[np.ndarray]) -> CandidateScore:
@@ -186,10 +194,10 @@ def diagnose(
         bic = n * np.log(rss / n) + (p + k) * np.log(n)
         return CandidateScore(name, k, float(np.sqrt(sq / n)) * 1e3, bic, coef[p:], coef[:p])
 
-    rms = float(np.sqrt(np.mean(r**2))) * 1e3
+    rms = float(np.sqrt(np.sum(r**2) / n)) * 1e3
     scores = {name: score(name, [eff]) for name, eff in blocks.items()}
     common = dict(
-        structure=residual_structure(r, pred.targets, obs.commands, order),
+        structure=residual_structure(r, pred.targets, obs.commands, order, keep),
         residual_rms_mm=rms,
         noise_floor_rms_mm=sigma_m * 1e3,
         chi2_p_value=p_value,
@@ -248,14 +256,33 @@ def effect_offsets(
     return out
 
 
+def kept_rows(result: IdentificationResult, shape: tuple[int, int]) -> np.ndarray:
+    """(N, T*3) boolean: the residual rows of the readings ``result`` kept (not rejected)."""
+    keep = np.ones(shape, dtype=bool)
+    for rej in result.rejected:
+        keep[rej.pose_index, rej.target_index] = False
+    return np.repeat(keep, 3, axis=1)
+
+
 def residual_structure(
-    r: np.ndarray, targets: np.ndarray, commands: np.ndarray, order: np.ndarray
+    r: np.ndarray,
+    targets: np.ndarray,
+    commands: np.ndarray,
+    order: np.ndarray,
+    keep: np.ndarray | None = None,
 ) -> dict[str, float]:
     """Spearman rank correlation of each pose's residual size with where and when it was
     measured: tool position x, y, z (space), mean actuator value (actuator coordinates) and
-    measurement order (time). Values near 0 mean no structure along that direction."""
-    size = np.sqrt(np.mean(r**2, axis=1))
-    centre = targets.mean(axis=1)
+    measurement order (time). Values near 0 mean no structure along that direction.
+
+    ``keep`` (same shape as ``r``) marks the rows to use; a pose with none is left out."""
+    keep = np.ones(r.shape, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    count = keep.sum(axis=1)
+    some = count > 0
+    size = np.sqrt(np.sum(np.where(keep, r, 0.0) ** 2, axis=1)[some] / count[some])
+    centre = targets.mean(axis=1)[some]
+    commands = np.asarray(commands)[some]
+    order = np.asarray(order)[some]
     probes = {
         "x": centre[:, 0],
         "y": centre[:, 1],

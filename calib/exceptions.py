@@ -17,4 +17,14 @@ class ConvergenceError(CalibError):
     """An estimator did not converge."""
 
 
-__all__ = ["CalibError", "ConvergenceError", "DatasetError", "IdentifiabilityError"]
+class TooManyOutliersError(CalibError):
+    """Robust identification rejected more readings than a few gross outliers would explain."""
+
+
+__all__ = [
+    "CalibError",
+    "ConvergenceError",
+    "DatasetError",
+    "IdentifiabilityError",
+    "TooManyOutliersError",
+]

@@ -35,6 +35,7 @@ def test_noise_free_recovery_of_table2(hexapod, hexapod_params, table2_values, n
     assert result.report.n_identifiable == 54
     assert result.estimated.all()
     assert result.residual_rms < 1e-12  # metres per coordinate
+    assert result.rejected == ()  # round-off is no outlier (the threshold's floor)
     error_mm = np.abs(result.values - table2_values) * 1e3
     worst = result.names[int(np.argmax(error_mm))]
     assert error_mm.max() < 1e-6, f"{worst} off by {error_mm.max():.3g} mm"
@@ -185,17 +186,18 @@ def _dataset(
     units: tuple[str, ...] | None = None,
     frame: str = "base",
     targets: tuple[str, ...] = TARGETS,
+    model: str = "hexapod_rrrprr",
 ) -> Dataset:
     n = 2
     commands = 0.22 + 0.001 * np.arange(n * len(actuators)).reshape(n, len(actuators))
     readings = np.arange(n * len(targets) * 2 * 3, dtype=float).reshape(n, len(targets), 2, 3)
     return Dataset(
-        model="hexapod_rrrprr",
+        model=model,
         frame=frame,
         actuator_names=actuators,
         actuator_units=units or ("mm",) * len(actuators),
         target_names=targets,
-        pose_ids=np.arange(n),
+        pose_ids=np.array([17, 4]),
         sets=np.array(["calibration"] * n),
         commands=commands,
         readings=readings,
@@ -213,6 +215,19 @@ def test_bind_dataset_orders_like_the_model(hexapod):
     obs = bind_dataset(hexapod, shuffled)
     np.testing.assert_array_equal(obs.commands, shuffled.commands[:, ::-1])
     np.testing.assert_array_equal(obs.measured, shuffled.readings.mean(axis=2)[:, ::-1])
+    # the labels travel with the data, ordered like the commands and the model's targets
+    assert obs.pose_ids == ("17", "4")
+    assert obs.target_names == hexapod.target_names == TARGETS
+
+
+def test_bind_dataset_rejects_another_models_dataset(hexapod):
+    with pytest.raises(DatasetError, match=r"model 'delta', but the mechanism is 'hexapod_rrrprr'"):
+        bind_dataset(hexapod, _dataset(model="delta"))
+
+
+def test_observations_without_labels():
+    obs = Observations(np.zeros((1, 6)), np.zeros((1, 3, 3)))
+    assert obs.pose_ids is None and obs.target_names is None
 
 
 def test_bind_dataset_rejects_degrees_for_a_prismatic_actuator(hexapod):

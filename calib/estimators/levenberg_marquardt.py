@@ -104,3 +104,59 @@ def levenberg_marquardt(
                         f"the cost {cost:.4g}"
                     )
     return LMResult(x, r, jac, cost, opt.max_iterations, False, history, "iteration limit")
+
+
+@dataclass(frozen=True)
+class ReweightedResult:
+    fit: LMResult  # of the last weighted solve (its residual and Jacobian are weighted)
+    residual: np.ndarray  # unweighted residual at fit.x
+    weights: np.ndarray  # per group of ``group`` rows, the ones of the last solve
+    rounds: int
+    iterations: int  # Levenberg-Marquardt iterations over all rounds
+
+
+WeightFn = Callable[[np.ndarray], np.ndarray]
+
+
+def reweighted_levenberg_marquardt(
+    residual: ResidualFn,
+    jacobian: JacobianFn,
+    x0: np.ndarray,
+    weights: WeightFn,
+    group: int = 1,
+    options: LMOptions | None = None,
+    recoverable: tuple[type[BaseException], ...] = (),
+    max_rounds: int = 20,
+    weight_tol: float = 1e-3,
+) -> ReweightedResult:
+    """Iteratively reweighted least squares (an M-estimator) solved by Levenberg-Marquardt.
+
+    ``weights(r)`` maps an unweighted residual to one positive weight per group of ``group``
+    consecutive rows (a 3D reading: its rows share a weight, judged by their joint norm);
+    each round minimises ``sum_g w_g |r_g(x)|^2`` with the weights of the previous round's
+    residual, until no weight changes by more than ``weight_tol`` (or ``max_rounds``).
+    """
+    x = np.array(x0, dtype=float)
+    r0, _ = residual(x)
+    w = np.asarray(weights(r0), dtype=float)
+    total = 0
+    for rounds in range(1, max_rounds + 1):
+        root = np.repeat(np.sqrt(w), group)
+
+        def weighted(xx: np.ndarray, root=root) -> tuple[np.ndarray, Any]:
+            r, state = residual(xx)
+            return root * r, state
+
+        def weighted_jacobian(xx: np.ndarray, state: Any, root=root) -> np.ndarray:
+            return root[:, None] * jacobian(xx, state)
+
+        fit = levenberg_marquardt(weighted, weighted_jacobian, x, options, recoverable)
+        total += fit.iterations
+        x = fit.x
+        r = fit.residual / root
+        w_new = np.asarray(weights(r), dtype=float)
+        change = float(np.max(np.abs(w_new - w))) if w.size else 0.0
+        if change <= weight_tol:
+            return ReweightedResult(fit, r, w, rounds, total)
+        w = w_new
+    return ReweightedResult(fit, r, w, max_rounds, total)
