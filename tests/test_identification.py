@@ -238,9 +238,11 @@ def test_bind_dataset_rejects_degrees_for_a_prismatic_actuator(hexapod):
         bind_dataset(hexapod, _dataset(units=units))
 
 
-def test_bind_dataset_rejects_other_frames(hexapod):
-    with pytest.raises(DatasetError, match=r"dataset frame is 'tracker'.*base frame"):
-        bind_dataset(hexapod, _dataset(frame="tracker"))
+def test_bind_dataset_takes_base_and_tracker_frames_only(hexapod):
+    assert bind_dataset(hexapod, _dataset(frame="tracker")).frame == "tracker"
+    assert bind_dataset(hexapod, _dataset(frame="base")).frame == "base"
+    with pytest.raises(DatasetError, match=r"dataset frame is 'world'.*'base'.*'tracker'"):
+        bind_dataset(hexapod, _dataset(frame="world"))
 
 
 def test_bind_dataset_rejects_missing_and_unknown_names(hexapod):
