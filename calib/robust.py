@@ -111,8 +111,6 @@ def robust_fit(
     )
 
 
-
-
 def rejections(
     norms: np.ndarray, n_free: int, n_targets: int, opt: RobustOptions
 ) -> tuple[np.ndarray, tuple[Rejection, ...], float]:
