@@ -214,8 +214,10 @@ def run(
         errs = pose_errors(v_poses[ok], sol.targets, local)
         recorder.log_error_map(stage, "verification_grid", v_poses[ok, :3], errs.position * 1e3)
         for k, i in enumerate(np.flatnonzero(ok)[::8]):  # one orientation per node
-            recorder.log_pose(f"verify_{stage}", k, truth, sol.qpos[8 * k])
-            recorder.log_targets(f"verify_{stage}", k, nominal_targets[i], sol.targets[8 * k])
+            recorder.log_pose("verification_node", k, truth, sol.qpos[8 * k])
+            recorder.log_targets(
+                "verification_node", k, nominal_targets[i], sol.targets[8 * k], group=stage
+            )
         stats = error_stats(errs).as_dict()
         stats["n_unreachable_after_compensation"] = int(np.sum(~ok))
         return stats
@@ -247,7 +249,7 @@ def run(
     for case in cases:
         if case.result is not None:
             for k, cost in enumerate(case.result.history):
-                recorder.log_metric(f"lm_cost/{case.name}", "lm_iteration", k, cost)
+                recorder.log_metric(f"log10_lm_cost/{case.name}", "lm_iteration", k, np.log10(cost))
             recorder.log_parameters(
                 case.name,
                 params.names,
@@ -277,4 +279,5 @@ def run(
             )
         }
     summary["runtime_s"] = time.perf_counter() - t_start
+    recorder.log_report(scenario.study, summary)
     return summary

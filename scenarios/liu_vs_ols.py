@@ -137,6 +137,8 @@ def run(
             maps.setdefault(group, {})[stage] = (poses, errs)
 
     recorder.log_mechanism(nominal)
+    for stage in [s for s in ("coarse", "ols", "liu") if s in stage_cmds]:  # the test layer
+        recorder.log_pose_set("test_node", truth, stage_cmds[stage], poses, f"test layer, {stage}")
     for group, stages in maps.items():
         vmax = max(float(np.max(e.position)) for _, e in stages.values()) * 1e3
         for stage, (poses, errs) in stages.items():
@@ -214,4 +216,5 @@ def run(
             )
             summary["figures"][f"estimates_{label}"] = f"estimates_{label}.png"
     summary["runtime_s"] = time.perf_counter() - t_start
+    recorder.log_report(scenario.study, summary)
     return summary

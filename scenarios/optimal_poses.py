@@ -170,7 +170,7 @@ def run(
         },
         f"{index} (column-scaled)",
     )
-    return {
+    summary = {
         "scenario": scenario.name,
         "model": nominal.name,
         "figures": {"index_vs_count": "index_vs_count.png"},
@@ -189,3 +189,5 @@ def run(
         "paper_table4": PAPER_TABLE4,
         "runtime_s": time.perf_counter() - t_start,
     }
+    recorder.log_report(scenario.study, summary)
+    return summary

@@ -144,10 +144,10 @@ def run(
         recorder.log_pose("node", i, nominal, q)
     for k, lam in enumerate(spectral.eigenvalues):
         recorder.log_metric("scaled_singular_values", "rank_index", k, float(np.sqrt(lam)))
-    recorder.log_text("identifiability/kept", "\n".join(f"* {n}" for n in kept_names))
+    recorder.log_text("identifiable", "\n".join(f"* {n}" for n in kept_names), "identifiable set")
 
     # a wrist angle or node outside the plan raises before this point (WorkspaceError)
-    return {
+    summary = {
         "scenario": scenario.name,
         "model": nominal.name,
         "n_source_errors": len(params),
@@ -172,3 +172,5 @@ def run(
         "plans": plans,
         "runtime_s": time.perf_counter() - t0,
     }
+    recorder.log_report(scenario.study, summary)
+    return summary

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -24,10 +25,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from scenarios.recording_blueprints import Bounds, ErrorMap, Logged, Series, build_blueprint
 from twin.mechanism import Mechanism
 
 ERROR_MAP_RADIUS = 0.004  # metres
 TARGET_RADIUS = 0.003  # metres
+PALETTE = [(220, 60, 50), (40, 110, 220), (40, 160, 80), (150, 80, 200), (230, 150, 30)]
 
 
 def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
@@ -38,6 +41,11 @@ def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     rgb = colormaps["viridis"](np.clip(np.nan_to_num(v) / max(vmax, 1e-300), 0.0, 1.0))[:, :3]
     rgb[~np.isfinite(v)] = 0.5
     return np.round(rgb * 255).astype(np.uint8)
+
+
+def entity_part(name: str) -> str:
+    """A display name as one plain entity-path part: ``test layer, ols`` -> ``test_layer_ols``."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "_"
 
 
 def _name(m: mujoco.MjModel, kind: mujoco.mjtObj, i: int, fallback: str) -> str:
@@ -90,12 +98,19 @@ def _active(method: Callable[..., None]) -> Callable[..., None]:
 
 
 class Recorder:
-    """Logs a scenario to rerun; disabled (every method a no-op) without path and viewer."""
+    """Logs a scenario to rerun; disabled (every method a no-op) without path and viewer.
+
+    What is logged is noted in ``self.logged``; on ``close`` the blueprint (if asked for with
+    ``send_blueprint``) is built from it, so every view it holds has data."""
 
     def __init__(self, path: Path | None, app_id: str, spawn_viewer: bool = False) -> None:
         self.path = None if path is None else Path(path)
         self.enabled = self.path is not None or spawn_viewer
+        self.logged = Logged()
         self._rec: Any = None
+        self._want_blueprint = False
+        self._home: Mechanism | None = None
+        self._reference: dict[str, list[Any]] = {}  # entity -> its first pose's archetypes
         if not self.enabled:
             return
         import rerun as rr
@@ -117,8 +132,11 @@ class Recorder:
         self.close()
 
     def close(self) -> None:
-        """Flush and write the footer (a file without it cannot be read back)."""
+        """Finish (series styles, the machine on the active timeline, the blueprint), flush
+        and write the footer (a file without it cannot be read back)."""
         if self._rec is not None:
+            with self._checked():
+                self._finish()
             self._rec.disconnect()
             self._rec = None
 
@@ -135,27 +153,34 @@ class Recorder:
 
     @_active
     def send_blueprint(self) -> None:
-        """Machine and targets, error maps, parameter bars and tables, metric curves."""
-        import rerun.blueprint as rrb
+        """Ask for a blueprint: it is built from what was logged and sent on ``close``."""
+        self._want_blueprint = True
 
-        self._rec.send_blueprint(
-            rrb.Blueprint(
-                rrb.Horizontal(
-                    rrb.Vertical(
-                        rrb.Spatial3DView(origin="world", name="machine and targets"),
-                        rrb.TimeSeriesView(origin="metrics", name="metrics"),
-                        row_shares=[2, 1],
-                    ),
-                    rrb.Vertical(
-                        rrb.Spatial3DView(origin="error_maps", name="error maps"),
-                        rrb.Tabs(
-                            rrb.BarChartView(origin="parameters", name="parameters"),
-                            rrb.TextDocumentView(origin="/", name="tables and notes"),
-                        ),
-                    ),
-                )
+    def _finish(self) -> None:
+        rr, log = self.rr, self.logged
+        seen: dict[str, int] = {}
+        for path, s in log.series.items():  # one point draws nothing as a line
+            name = path.split("/")[-1]
+            family = path.rsplit("/", 1)[0]
+            color = [PALETTE[seen.setdefault(family, 0) % len(PALETTE)]]
+            seen[family] += 1
+            style = (
+                rr.SeriesPoints(names=[name], colors=color, markers=["circle"], marker_sizes=[4.0])
+                if s.as_points
+                else rr.SeriesLines(names=[name], colors=color, widths=[2.0])
             )
-        )
+            self._rec.log(path, style, static=True)
+        if self._home is not None and not log.pose_timelines:  # no pose: show the home pose
+            self._log_bodies(self._home, self._home.home_qpos, static=True)
+        active = log.active_timeline()
+        if active is not None and active not in log.pose_timelines and self._reference:
+            self._time(
+                active, min(next(s.indices for s in log.series.values() if s.timeline == active))
+            )
+            for path, archetypes in self._reference.items():  # the first pose on this timeline too
+                self._rec.log(path, *archetypes)
+        if self._want_blueprint:
+            self._rec.send_blueprint(build_blueprint(log))
 
     def _body_path(self, m: mujoco.MjModel, b: int) -> str:
         name = _name(m, mujoco.mjtObj.mjOBJ_BODY, b, "body")
@@ -165,6 +190,7 @@ class Recorder:
     def log_mechanism(self, mech: Mechanism) -> None:
         """Every geom as a static shape under its body, placed by geom_pos/geom_quat."""
         rr, m = self.rr, mech.model
+        self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for g in range(m.ngeom):
             shape = geom_shape(rr, m, g)
             if shape is None:
@@ -175,21 +201,35 @@ class Recorder:
             )
             path = f"{self._body_path(m, int(m.geom_bodyid[g]))}/{geom}"
             self._rec.log(path, pose, shape, static=True)
+        self.logged.mechanism = True
+        self._home = mech
+        d = mujoco.MjData(m)
+        d.qpos[:] = mech.home_qpos
+        mujoco.mj_kinematics(m, d)
+        shown = np.array([geom_shape(rr, m, g) is not None for g in range(m.ngeom)], dtype=bool)
+        r = np.minimum(m.geom_rbound, 1.0)[shown, None]  # a sphere around each shown geom
+        self.logged.machine_bounds.add(np.vstack([d.geom_xpos[shown] - r, d.geom_xpos[shown] + r]))
+
+    def _log_bodies(self, mech: Mechanism, qpos: np.ndarray, static: bool = False) -> None:
+        rr, m, d = self.rr, mech.model, mech.data
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        self.logged.machine_bounds.add(d.xpos[1:])
+        for b in range(1, m.nbody):
+            path = self._body_path(m, b)
+            t = rr.Transform3D(
+                translation=d.xpos[b], quaternion=rr.Quaternion(xyzw=_xyzw(d.xquat[b]))
+            )
+            self._rec.log(path, t, static=static)
+            if not static:
+                self._reference.setdefault(path, [t])
 
     @_active
     def log_pose(self, timeline: str, index: int, mech: Mechanism, qpos: np.ndarray) -> None:
         """One configuration: a world Transform3D per body (flat under world/bodies)."""
-        rr, m, d = self.rr, mech.model, mech.data
-        d.qpos[:] = qpos
-        mujoco.mj_kinematics(m, d)
         self._time(timeline, index)
-        for b in range(1, m.nbody):
-            self._rec.log(
-                self._body_path(m, b),
-                rr.Transform3D(
-                    translation=d.xpos[b], quaternion=rr.Quaternion(xyzw=_xyzw(d.xquat[b]))
-                ),
-            )
+        self._log_bodies(mech, qpos)
+        self.logged.pose_timelines.setdefault(timeline, set()).add(int(index))
 
     @_active
     def log_targets(
@@ -199,30 +239,65 @@ class Recorder:
         nominal: np.ndarray,
         measured: np.ndarray,
         scale: float = 100.0,
+        group: str = "targets",
     ) -> None:
-        """Nominal and measured targets (T, 3) in metres, and the error magnified ``scale``x."""
+        """Nominal and measured targets (T, 3) in metres, and the error magnified ``scale``x,
+        under ``world/targets/<group>`` (one 3D view per group)."""
         rr = self.rr
         nominal = np.atleast_2d(np.asarray(nominal, dtype=float))
         measured = np.atleast_2d(np.asarray(measured, dtype=float))
         error_mm = np.linalg.norm(measured - nominal, axis=1) * 1e3
         self._time(timeline, index)
-        self._rec.log(
-            "world/targets/nominal",
-            rr.Points3D(nominal, radii=TARGET_RADIUS, colors=[[110, 130, 255]]),
-        )
-        self._rec.log(
-            "world/targets/measured",
-            rr.Points3D(measured, radii=TARGET_RADIUS, colors=[[255, 130, 60]]),
-        )
-        self._rec.log(
-            "world/targets/error",
-            rr.Arrows3D(
+        root = f"world/targets/{entity_part(group)}"
+        logs = {
+            f"{root}/nominal": rr.Points3D(nominal, radii=TARGET_RADIUS, colors=[[110, 130, 255]]),
+            f"{root}/measured": rr.Points3D(measured, radii=TARGET_RADIUS, colors=[[255, 130, 60]]),
+            f"{root}/error": rr.Arrows3D(
                 origins=nominal,
                 vectors=(measured - nominal) * scale,
+                radii=TARGET_RADIUS / 2,
                 labels=[f"{e:.3f} mm (arrow x{scale:g})" for e in error_mm],
+                show_labels=True,
                 colors=[[230, 40, 40]],
             ),
-        )
+        }
+        for path, archetype in logs.items():
+            self._rec.log(path, archetype)
+            self._reference.setdefault(path, [archetype])
+        self.logged.machine_bounds.add(nominal)
+        self.logged.pose_timelines.setdefault(timeline, set()).add(int(index))
+        self.logged.target_groups.setdefault(entity_part(group), group)
+
+    @_active
+    def log_poses(
+        self,
+        timeline: str,
+        indices: Sequence[int],
+        mech: Mechanism,
+        qpos: np.ndarray,
+        nominal: np.ndarray,
+        measured: np.ndarray,
+        group: str,
+        scale: float = 100.0,
+    ) -> None:
+        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3)."""
+        for k, q, a, b in zip(indices, qpos, nominal, measured, strict=True):
+            self.log_pose(timeline, int(k), mech, q)
+            self.log_targets(timeline, int(k), a, b, scale=scale, group=group)
+
+    def log_pose_set(
+        self,
+        timeline: str,
+        mech: Mechanism,
+        commands: np.ndarray,
+        poses: np.ndarray,
+        group: str,
+        scale: float = 100.0,
+    ) -> None:
+        """The machine ``mech`` driven by ``commands`` (N, A) at pose k of ``timeline``, its
+        targets against those of the commanded ``poses`` (N, 6) and the error arrows."""
+        if self._rec is not None:
+            _log_pose_set(self, timeline, mech, commands, np.asarray(poses), group, scale)
 
     @_active
     def log_error_map(
@@ -233,20 +308,55 @@ class Recorder:
         errors_mm: np.ndarray,
         vmax_mm: float | None = None,
     ) -> None:
-        """Nodes (N, 3, metres) coloured by error (viridis over [0, vmax_mm]), static."""
+        """Nodes (N, 3, metres) coloured by error (viridis over [0, vmax_mm]), static, with a
+        colour scale in mm beside them. Nodes at one position (several orientations) show the
+        largest error there; spheres are sized to the node spacing."""
+        rr = self.rr
+        positions = np.asarray(positions, dtype=float)
         errors = np.asarray(errors_mm, dtype=float).ravel()
         finite = errors[np.isfinite(errors)]
         vmax = float(vmax_mm) if vmax_mm is not None else float(finite.max(initial=0.0))
+        if positions.ndim != 2 or positions.shape[1] != 3:  # rerun names the mistake
+            self._rec.log("error_maps/invalid", rr.Points3D(positions), static=True)
+            return
+        nodes, worst, repeats = merge_nodes(positions, errors)
+        root = f"error_maps/{entity_part(stage)}/{entity_part(layer)}"
+        spacing = node_spacing(nodes)
+        many = "max over " if np.any(repeats > 1) else ""
+        labels = [f"{many}{e:.3f} mm" for e in worst]
+        self._rec.log("error_maps", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self._rec.log(
-            f"error_maps/{stage}/{layer}",
-            self.rr.Points3D(
-                np.asarray(positions, dtype=float),
-                colors=error_colors(errors, vmax),
-                radii=ERROR_MAP_RADIUS,
-                labels=[f"{e:.3f} mm" for e in errors],
+            f"{root}/nodes",
+            rr.Points3D(
+                nodes,
+                colors=error_colors(worst, vmax),
+                radii=min(ERROR_MAP_RADIUS, 0.3 * spacing),
+                labels=labels,
+                show_labels=False,
             ),
             static=True,
         )
+        bounds = Bounds()
+        bounds.add(nodes)
+        if not bounds.empty:
+            centres, half, ticks, tick_labels = colour_scale(bounds, spacing, vmax)
+            self._rec.log(
+                f"{root}/scale_mm",
+                rr.Boxes3D(
+                    centers=centres,
+                    half_sizes=half,
+                    colors=error_colors(np.linspace(0, vmax, len(centres)), vmax),
+                    fill_mode="solid",
+                ),
+                static=True,
+            )
+            self._rec.log(
+                f"{root}/scale_mm/ticks",
+                rr.Points3D(ticks, radii=1e-4, labels=tick_labels, show_labels=True),
+                static=True,
+            )
+            bounds.add(centres)
+        self.logged.error_maps[root] = ErrorMap(stage, layer, vmax, bounds)
 
     @_active
     def log_parameters(
@@ -256,30 +366,171 @@ class Recorder:
         estimates: np.ndarray,
         std: np.ndarray | None = None,
         truth: np.ndarray | None = None,
+        unit: str = "mm or deg",
     ) -> None:
-        """Bar charts of estimates, standard errors and truth, plus a markdown table."""
-        rr, root = self.rr, f"parameters/{stage}"
-        est = np.asarray(estimates, dtype=float)
-        columns = {"estimate": est, "std": std, "truth": truth}
-        for key, values in columns.items():
-            if values is not None:
-                bars = rr.BarChart(np.nan_to_num(np.asarray(values, dtype=float)))
-                self._rec.log(f"{root}/{key}", bars, static=True)
-        rows = [f"### {stage}", "", "| parameter | estimate | std | truth |", "|---|---|---|---|"]
-        for k, name in enumerate(names):
-            s = "" if std is None else f"{std[k]:.4g}"
-            t = "" if truth is None else f"{truth[k]:.4g}"
-            rows.append(f"| {name} | {est[k]:.4g} | {s} | {t} |")
-        self.log_text(f"{root}/table", "\n".join(rows))
+        """A markdown table of estimates by name, with standard errors and, when the truth is
+        known, the deviation from it in standard errors (one table view per stage)."""
+        self.log_text(
+            f"parameters/{stage}",
+            parameter_table(stage, names, estimates, std, truth, unit),
+            name=f"parameters: {stage}",
+        )
 
     @_active
     def log_metric(self, name: str, timeline: str, index: int, value: float) -> None:
         """One point of the curve ``metrics/<name>`` against ``timeline``."""
-        self._time(timeline, index)
-        self._rec.log(f"metrics/{name}", self.rr.Scalars(float(value)))
+        self._scalar(name, timeline, index, value, points=False)
 
     @_active
-    def log_text(self, path: str, markdown: str) -> None:
-        """A static markdown document (a table, a residual diagnosis ...)."""
+    def log_points(self, name: str, timeline: str, index: int, value: float) -> None:
+        """One point of ``metrics/<name>`` against ``timeline``, drawn as a marker (a scatter
+        of a per-pose value against the variable the timeline is)."""
+        self._scalar(name, timeline, index, value, points=True)
+
+    def _scalar(self, name: str, timeline: str, index: int, value: float, points: bool) -> None:
+        path = f"metrics/{name}"
+        self._time(timeline, index)
+        self._rec.log(path, self.rr.Scalars(float(value)))
+        s = self.logged.series.setdefault(path, Series(timeline, points=points))
+        if s.timeline != timeline:
+            raise ValueError(f"{path}: logged against {s.timeline} and {timeline}")
+        s.indices.add(int(index))
+
+    @_active
+    def log_bars(self, name: str, labels: Sequence[str], values: np.ndarray, unit: str) -> None:
+        """A static bar chart ``bars/<name>``; the view's name lists the bars in order."""
+        values = np.nan_to_num(np.asarray(values, dtype=float))
+        self._rec.log(f"bars/{name}", self.rr.BarChart(values), static=True)
+        self.logged.bars[f"bars/{name}"] = f"{name.replace('_', ' ')} ({unit}): " + ", ".join(
+            labels
+        )
+
+    @_active
+    def log_text(self, path: str, markdown: str, name: str | None = None) -> None:
+        """A static markdown document (a table, a residual diagnosis ...), one text view."""
         doc = self.rr.TextDocument(markdown, media_type=self.rr.MediaType.MARKDOWN)
         self._rec.log(path, doc, static=True)
+        self.logged.texts[path] = name or path.replace("_", " ")
+
+    @_active
+    def log_loop(
+        self,
+        mech: Mechanism,
+        order: np.ndarray,
+        prediction: Any,
+        measured: np.ndarray,
+        after: np.ndarray,
+    ) -> None:
+        """Loop closing: each pose's residual before (``prediction``, a geometric fit's) and
+        after the named effect (``after`` targets), as arrows and against measurement order."""
+        from scenarios.recording_loop import log_loop
+
+        log_loop(self, mech, order, prediction, measured, after)
+
+    @_active
+    def log_verdict(
+        self, diagnosis: Any, before_mm: float, after_mm: float, noise_mm: float
+    ) -> None:
+        """The named effect, why, and the residual before and after, as the verdict view."""
+        from scenarios.recording_loop import verdict_markdown
+
+        self.log_text(
+            "verdict", verdict_markdown(diagnosis, before_mm, after_mm, noise_mm), "verdict"
+        )
+
+    @_active
+    def log_report(self, study: str, summary: dict[str, Any]) -> None:
+        """The study's report.md (its key numbers and tables) as the ``report`` text view."""
+        import importlib
+
+        from scenarios.runner import STUDIES
+
+        report = importlib.import_module(STUDIES[study][1]).report
+        self.log_text("report", report(summary), name="report: key numbers")
+
+
+def merge_nodes(positions: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Unique positions (to 0.1 um), the largest error at each, and how many shared it."""
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    if len(positions) != len(errors):
+        return positions, errors, np.ones(len(positions), dtype=int)
+    keys = np.round(positions * 1e7).astype(np.int64)
+    _, first, inverse, counts = np.unique(
+        keys, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
+    inverse = inverse.ravel()
+    worst = np.full(len(first), -np.inf)
+    np.maximum.at(worst, inverse, np.where(np.isfinite(errors), errors, -np.inf))
+    worst[~np.isfinite(worst)] = np.nan
+    order = np.argsort(first)  # keep the logged order of first appearance
+    return positions[first[order]], worst[order], counts[order]
+
+
+def node_spacing(nodes: np.ndarray) -> float:
+    """The smallest distance between two nodes (metres); 1 cm for fewer than two."""
+    if len(nodes) < 2:
+        return 0.01
+    d = np.linalg.norm(nodes[:, None, :] - nodes[None, :, :], axis=-1)
+    d[np.diag_indices(len(nodes))] = np.inf
+    return float(max(d.min(), 1e-4))
+
+
+def colour_scale(
+    bounds: Bounds, spacing: float, vmax: float, n: int = 10
+) -> tuple[np.ndarray, list[float], np.ndarray, list[str]]:
+    """A vertical column of ``n`` boxes beside the nodes (viridis, 0 at the bottom) and three
+    labelled ticks: 0, vmax/2 and vmax in mm."""
+    size = bounds.hi - bounds.lo
+    height = max(float(size.max()), 4 * spacing)
+    x = bounds.hi[0] + 1.5 * spacing
+    y = (bounds.lo[1] + bounds.hi[1]) / 2
+    z0 = (bounds.lo[2] + bounds.hi[2]) / 2 - height / 2
+    step = height / n
+    centres = np.array([[x, y, z0 + (k + 0.5) * step] for k in range(n)])
+    half = [0.25 * spacing, 0.25 * spacing, step / 2]
+    ticks = np.array([[x + 0.4 * spacing, y, z0 + f * height] for f in (0.0, 0.5, 1.0)])
+    return centres, half, ticks, [f"{f * vmax:.3g} mm" for f in (0.0, 0.5, 1.0)]
+
+
+def parameter_table(
+    stage: str,
+    names: Sequence[str],
+    estimates: np.ndarray,
+    std: np.ndarray | None,
+    truth: np.ndarray | None,
+    unit: str,
+) -> str:
+    est = np.asarray(estimates, dtype=float)
+    head = ["parameter", f"estimate ({unit})", "std"]
+    if truth is not None:
+        head += ["truth", "estimate - truth", "|dev| / std"]
+    rows = [f"### {stage}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for k, name in enumerate(names):
+        s = float("nan") if std is None else float(std[k])
+        cells = [name, f"{est[k]:.4g}", "" if std is None else f"{s:.4g}"]
+        if truth is not None:
+            dev = est[k] - float(truth[k])
+            z = abs(dev) / s if np.isfinite(s) and s > 0 else float("nan")
+            cells += [f"{float(truth[k]):.4g}", f"{dev:+.3g}", f"{z:.2g}"]
+        rows.append("| " + " | ".join(cells) + " |")
+    return "\n".join(rows)
+
+
+def _log_pose_set(
+    rec: Recorder,
+    timeline: str,
+    mech: Mechanism,
+    commands: np.ndarray,
+    poses: np.ndarray,
+    group: str,
+    scale: float,
+) -> None:
+    from twin.kinematics import pose_to_frame
+    from twin.kinematics_batch import forward_batch
+
+    sol = forward_batch(mech, commands)
+    local = mech.target_local()
+    nominal = np.einsum("nij,tj->nti", pose_to_frame(poses)[0], local) + poses[:, None, :3]
+    rec.log_poses(
+        timeline, range(len(commands)), mech, sol.qpos, nominal, sol.targets, group, scale
+    )

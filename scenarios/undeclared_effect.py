@@ -106,12 +106,15 @@ def run(
     after_pred = after_pred + scale * (after_pred - head)
     cal_after = cal_after + scale * (cal_after - head)
     rms_after = float(np.sqrt(np.mean((cal.measured - cal_after) ** 2)))
-    for name, s in diag.scores.items():
-        recorder.log_metric(f"heldout_rms_mm/{name}", "candidate", 0, s.heldout_rms_mm)
-    recorder.log_text(
-        "diagnosis", f"**{diag.chosen}**: {diag.reason}\n\nchi-square p = {diag.chi2_p_value:.3g}"
+    recorder.log_mechanism(nominal)
+    recorder.log_loop(
+        nominal, cal_ds.order, model.predict(result.values, cal.commands), cal.measured, cal_after
     )
-    return {
+    recorder.log_bars(
+        "held-out_RMS", list(diag.scores), [s.heldout_rms_mm for s in diag.scores.values()], "mm"
+    )
+    recorder.log_verdict(diag, rms_before * 1e3, rms_after * 1e3, sigma * 1e3)
+    summary = {
         "scenario": scenario.name,
         "model": nominal.name,
         "effects_in_truth": [e.name for e in effects],
@@ -130,3 +133,5 @@ def run(
         },
         "runtime_s": time.perf_counter() - t0,
     }
+    recorder.log_report(scenario.study, summary)
+    return summary

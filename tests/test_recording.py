@@ -29,11 +29,14 @@ class Readback:
         self.times: dict[str, set[int]] = defaultdict(set)  # timeline -> time points
         self.timelines: dict[str, set[str]] = defaultdict(set)  # entity -> its timelines
         self.static: dict[str, bool] = {}
+        self.has_static: set[str] = set()
         self.rows: dict[tuple[str, str], list] = defaultdict(list)  # (entity, column)
         for chunk in store.stream():
             batch = chunk.to_record_batch()
             entity = chunk.entity_path
             self.static[entity] = chunk.is_static
+            if chunk.is_static:
+                self.has_static.add(entity)
             for field in batch.schema:
                 kind = (field.metadata or {}).get(b"rerun:kind", b"").decode()
                 if kind == "index" and field.name != "log_time":
@@ -62,7 +65,9 @@ def recorded(tmp_path_factory) -> tuple[Readback, Mechanism, list[np.ndarray]]:
             for i, q in enumerate(qs):
                 rec.log_pose("pose", i, mech, q)  # runs mj_kinematics on mech.data
                 targets = mech.data.site_xpos[mech.target_sites].copy()
-                rec.log_targets("pose", i, targets, targets + np.array([1e-5, 0.0, -2e-5]))
+                rec.log_targets(
+                    "pose", i, targets, targets + np.array([1e-5, 0.0, -2e-5]), group="cal"
+                )
                 rec.log_metric("closure_residual", "pose", i, 1e-15 * (i + 1))
             grid = np.stack(np.meshgrid([-0.02, 0, 0.02], [-0.02, 0, 0.02], [0.22]), -1)
             rec.log_error_map("before", "layer_220", grid.reshape(-1, 3), np.arange(9.0) / 100)
@@ -71,7 +76,8 @@ def recorded(tmp_path_factory) -> tuple[Readback, Mechanism, list[np.ndarray]]:
             )
             rec.log_metric("lm_cost/fit", "lm_iteration", 0, 3.0)
             rec.log_metric("lm_cost/fit", "lm_iteration", 1, 0.5)
-            rec.log_text("diagnosis", "# Residual\n\n* white")
+            rec.log_points("single", "pose", 0, 1.0)  # one point: drawn as a marker
+            rec.log_text("verdict", "# Residual\n\n* white")
         assert path.stat().st_size > 0
         return Readback(path), mech, qs
     finally:
@@ -85,19 +91,17 @@ def test_expected_entities_exist(recorded):
         "/world/bodies/platform",
         "/world/bodies/leg3_rod",
         "/world/bodies/world/base_plate",
-        "/world/targets/nominal",
-        "/world/targets/measured",
-        "/world/targets/error",
-        "/error_maps/before/layer_220",
-        "/parameters/fit/estimate",
-        "/parameters/fit/std",
-        "/parameters/fit/table",
+        "/world/targets/cal/nominal",
+        "/world/targets/cal/measured",
+        "/world/targets/cal/error",
+        "/error_maps/before/layer_220/nodes",
+        "/error_maps/before/layer_220/scale_mm",
+        "/parameters/fit",
         "/metrics/closure_residual",
         "/metrics/lm_cost/fit",
-        "/diagnosis",
+        "/verdict",
     ):
         assert expected in rb.entities, expected
-    assert "/parameters/fit/truth" not in rb.entities  # no truth given
     geoms = [e for e in rb.entities if e.startswith("/world/bodies/") and e.count("/") == 4]
     assert len(geoms) == mech.model.ngeom  # every hexapod geom has a shape
     assert all(rb.static[e] for e in geoms)
@@ -116,6 +120,7 @@ def test_pose_timeline_and_body_transforms(recorded):
     assert rb.times["lm_iteration"] == {0, 1}
     # each call carries its own timeline only (a metric does not inherit the pose's time)
     assert rb.timelines["/metrics/lm_cost/fit"] == {"lm_iteration"}
+    # the viewer opens on "pose" (most curves): the machine is not copied to other timelines
     assert rb.timelines["/world/bodies/platform"] == {"pose"}
     entity = "/world/bodies/platform"
     logged_p = np.array([t[0] for t in rb.rows[entity, "Transform3D:translation"]])
@@ -147,14 +152,19 @@ def test_geom_shapes_sit_in_body_coordinates(recorded):
 
 def test_targets_error_map_and_parameters_values(recorded):
     rb, _, _ = recorded
-    vectors = np.array(rb.rows["/world/targets/error", "Arrows3D:vectors"][0])
+    vectors = np.array(rb.rows["/world/targets/cal/error", "Arrows3D:vectors"][0])
     np.testing.assert_allclose(vectors, np.tile([1e-3, 0.0, -2e-3], (len(vectors), 1)), atol=1e-8)
-    assert "x100" in rb.rows["/world/targets/error", "Arrows3D:labels"][0][0]
-    labels = rb.rows["/error_maps/before/layer_220", "Points3D:labels"][0]
+    assert "x100" in rb.rows["/world/targets/cal/error", "Arrows3D:labels"][0][0]
+    nodes = "/error_maps/before/layer_220/nodes"
+    labels = rb.rows[nodes, "Points3D:labels"][0]
     assert labels[0] == "0.000 mm" and labels[-1] == "0.080 mm"
-    assert len(set(rb.rows["/error_maps/before/layer_220", "Points3D:colors"][0])) == 9
-    assert rb.static["/error_maps/before/layer_220"]
-    table = rb.rows["/parameters/fit/table", "TextDocument:text"][0][0]
+    assert len(set(rb.rows[nodes, "Points3D:colors"][0])) == 9
+    assert rb.static[nodes]
+    radius = rb.rows[nodes, "Points3D:radii"][0][0]
+    assert radius <= 0.3 * 0.02 + 1e-9  # spheres smaller than the 20 mm node spacing
+    ticks = rb.rows["/error_maps/before/layer_220/scale_mm/ticks", "Points3D:labels"][0]
+    assert ticks == ["0 mm", "0.04 mm", "0.08 mm"]  # the colour scale, in mm
+    table = rb.rows["/parameters/fit", "TextDocument:text"][0][0]
     assert "| leg2.dl | -0.2 | nan |" in table
     scalars = rb.rows["/metrics/lm_cost/fit", "Scalars:scalars"]
     assert [s[0] for s in scalars] == [3.0, 0.5]
@@ -194,6 +204,9 @@ def test_disabled_recorder_writes_nothing(tmp_path, monkeypatch):
         rec.log_targets("pose", 0, np.zeros((3, 3)), np.ones((3, 3)))
         rec.log_error_map("s", "l", np.zeros((2, 3)), np.ones(2))
         rec.log_parameters("s", ["a"], np.ones(1), None, np.ones(1))
+        rec.log_points("p", "t", 0, 1.0)
+        rec.log_bars("b", ["a"], np.ones(1), "mm")
+        rec.log_report("undeclared_effect", {})
         rec.log_metric("x", "t", 0, 1.0)
         rec.log_text("t", "text")
     rec.close()  # idempotent
@@ -209,3 +222,109 @@ def test_close_is_idempotent_and_file_readable(tmp_path):
     rec.log_metric("m", "t", 1, 2.0)  # after close: a no-op, not an error
     rb = Readback(path)
     assert rb.times["t"] == {0} and rb.n_blueprints == 0
+
+
+def _blueprint(path: Path) -> tuple[str, list[dict]]:
+    """The active timeline and the views of the blueprint stored in an .rrd file."""
+    reader = rerun_chunk.RrdReader(str(path))
+    (store,) = reader.blueprints()
+    rows: dict[str, dict] = defaultdict(dict)
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        for field in batch.schema:
+            if (field.metadata or {}).get(b"rerun:kind", b"").decode() == "data":
+                rows[chunk.entity_path][field.name] = batch.column(field.name).to_pylist()[-1]
+    timeline = rows["/time_panel"]["TimePanelBlueprint:timeline"][0]
+    views = []
+    for entity, r in rows.items():
+        if "ViewBlueprint:class_identifier" in r:
+            origin = r["ViewBlueprint:space_origin"][0]
+            queries = rows[f"{entity}/ViewContents"]["ViewContents:query"]
+            views.append(
+                {
+                    "kind": r["ViewBlueprint:class_identifier"][0],
+                    "name": r["ViewBlueprint:display_name"][0],
+                    "queries": [q.replace("$origin", origin) for q in queries],
+                }
+            )
+    return timeline, views
+
+
+def _matches(entity: str, query: str) -> bool:
+    e, q = entity.strip("/"), query.strip("/")
+    if q.endswith("/**"):
+        root = q[:-3]
+        return e == root or e.startswith(root + "/")
+    return e == q
+
+
+def assert_every_view_has_data(rb: Readback, path: Path) -> list[dict]:
+    """Each view of the blueprint shows data on the active timeline (or static data); each
+    curve in a plot has more than one point or is drawn as points."""
+    timeline, views = _blueprint(path)
+    assert views
+    with_data = {e for (e, _c) in rb.rows}
+    for view in views:
+        shown = [e for e in with_data if any(_matches(e, q) for q in view["queries"])]
+        live = [e for e in shown if timeline in rb.timelines[e] or e in rb.has_static]
+        assert live, f"view '{view['name']}' has no data on timeline {timeline}"
+        if view["kind"] == "TimeSeries":
+            curves = [e for e in shown if (e, "Scalars:scalars") in rb.rows]
+            assert curves, view["name"]
+            for e in curves:
+                assert timeline in rb.timelines[e], (view["name"], e)
+                n = len(rb.rows[e, "Scalars:scalars"])
+                assert n > 1 or (e, "SeriesPoints:markers") in rb.rows, (view["name"], e, n)
+        if view["kind"] == "3D" and any(q.startswith("world/bodies") for q in view["queries"]):
+            bodies = [e for e in shown if e.count("/") == 3 and timeline in rb.timelines[e]]
+            assert bodies or any(e in rb.has_static for e in shown), view["name"]
+    return views
+
+
+def test_the_blueprint_is_built_from_what_was_logged(tmp_path):
+    path = tmp_path / "bp.rrd"
+    mech = Mechanism.from_xml(HEXAPOD)
+    with Recorder(path, "bp") as rec:
+        rec.send_blueprint()
+        rec.log_mechanism(mech)
+        for i in range(3):
+            rec.log_pose("pose", i, mech, mech.home_qpos)
+            t = mech.data.site_xpos[mech.target_sites].copy()
+            rec.log_targets("pose", i, t, t + 1e-5, group="before")
+        rec.log_error_map("before", "grid", np.eye(3) * 0.02, np.arange(3.0))
+        rec.log_parameters("fit", ["a", "b"], np.ones(2), np.ones(2), np.zeros(2))
+        rec.log_metric("lm_cost/fit", "lm_iteration", 0, 3.0)
+        rec.log_metric("lm_cost/fit", "lm_iteration", 1, 1.0)
+        rec.log_points("heldout/one", "lm_iteration", 0, 1.0)
+        rec.log_metric("elsewhere", "other", 0, 1.0)  # not on the active timeline: no view
+        rec.log_text("verdict", "**fine**")
+    views = assert_every_view_has_data(Readback(path), path)
+    names = [v["name"] for v in views]
+    assert "machine, targets and error arrows: before" in names
+    assert any(n.startswith("error map before / grid (colour 0-2 mm)") for n in names)
+    assert {"parameters: fit", "verdict"} <= set(names)
+    assert not any("elsewhere" in n for n in names)
+    assert _blueprint(path)[0] == "lm_iteration"  # most curves are plotted against it
+    rb = Readback(path)  # and the machine is placed on it too (its first pose)
+    assert rb.timelines["/world/bodies/platform"] == {"pose", "lm_iteration"}
+
+
+@pytest.mark.parametrize("name", ["undeclared_effect", "hexapod_paper"])
+def test_scenario_recordings_show_data_in_every_view(tmp_path, name):
+    from scenarios.runner import run_scenario
+
+    _, out = run_scenario(name, tmp_path, quiet=True)
+    path = out / f"{name}.rrd"
+    rb = Readback(path)
+    views = assert_every_view_has_data(rb, path)
+    names = " | ".join(v["name"] for v in views)
+    assert "report: key numbers" in names
+    if name == "undeclared_effect":  # the loop: residual before and after, the named effect
+        assert "verdict" in names and "residual mm against measurement order" in names
+        verdict = rb.rows["/verdict", "TextDocument:text"][0][0]
+        assert "Verdict:" in verdict and "tracker noise floor" in verdict
+        assert len(rb.rows["/metrics/residual_mm/with_named_effect", "Scalars:scalars"]) > 1
+    else:  # one error map per stage, the LM cost per iteration of each case
+        for stage in ("before", "after_random_few", "after_random_many"):
+            assert f"error map {stage} / verification_grid" in names
+        assert rb.times["lm_iteration"] and len(rb.times["lm_iteration"]) > 1

@@ -52,14 +52,15 @@ def test_recording_holds_the_verification(hexapod_run):
     summary, out_dir = hexapod_run
     store = rerun_chunk.RrdReader(str(out_dir / summary["recording"])).store()
     entities = list(store.schema().entity_paths())
-    assert "/error_maps/before/verification_grid" in entities
-    assert "/error_maps/after_random_many/verification_grid" in entities
-    assert "/parameters/random_many/estimate" in entities
+    assert "/error_maps/before/verification_grid/nodes" in entities
+    assert "/error_maps/after_random_many/verification_grid/nodes" in entities
+    assert "/parameters/random_many" in entities  # the estimates as a table
+    assert "/world/targets/before/error" in entities
     times = set()
     for chunk in store.stream():
         batch = chunk.to_record_batch()
-        if "verify_before" in batch.schema.names:
-            times.update(batch.column("verify_before").to_pylist())
+        if "verification_node" in batch.schema.names:
+            times.update(t for t in batch.column("verification_node").to_pylist() if t is not None)
     assert times == set(range(27))  # one pose per node of the 3 x 3 x 3 grid
 
 
