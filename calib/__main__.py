@@ -1,47 +1,55 @@
-"""Command line for measured data: ``python -m calib identify --model M.xml --errors E.toml
---data readings.csv [--out result.json] [--fix-unidentifiable] [--sigma-mm S]`` and
-``python -m calib diagnose ... --sigma-mm 0.005`` (is the residual more than noise, and which
-effect is it).
+"""Command line for measured data (any machine: serial, parallel or hybrid).
 
-Reads the nominal MJCF, the error model and a Dataset (CSV + JSON sidecar), reports which
-parameters the poses can identify, estimates them robustly (gross outliers are rejected and
-listed) and prints each with its standard error (mm, deg); ``--out`` writes the same as JSON
-(atomically). A fit that did not converge or does not match the declared tracker accuracy
-exits non-zero with the likely cause (exit codes in :mod:`calib.verdict`).
+    python -m calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
+                             [--out R.json] [--sigma-mm S] [--prior-std length=1,angle=0.1]
+    python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
+                             [--set test] [--out V.json]
+    python -m calib diagnose --model M.xml --errors E.toml --data D.csv --sigma-mm S
+
+``identify`` fits the error model to the readings of one set (default: the rows marked
+'calibration', else all), robustly (gross outliers are rejected and listed), in the base
+frame or, for a sidecar with "frame": "tracker", with the tracker's registration estimated
+alongside. ``verify`` scores any set before (nominal) and after (identified): the 3D position
+error per reading (RMS, mean, max), a per-reading CSV and a PNG. ``diagnose`` asks whether the
+residual is more than the tracker noise and which physical effect explains it.
+
+Exit codes (calib.verdict): 0 success; 2 bad input (the message names the cause); 3 the fit
+did not converge; 4 the data does not fit the model (residual far above the declared tracker
+accuracy, implausible estimates, or too many outliers; the likely cause is said); 130
+interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 import math
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import write_json_atomic
-from calib.data_hints import likely_causes
-from calib.dataset import Dataset, DatasetError, read_dataset
-from calib.estimators.levenberg_marquardt import LMOptions
+from calib.atomic_files import write_json_atomic, write_text_atomic
+from calib.dataset import DatasetError, read_dataset
 from calib.exceptions import CalibError
-from calib.identify import (
-    IdentificationResult,
-    Observations,
-    bind_dataset,
-    identify,
-    model_from_files,
-)
-from calib.model import CalibrationModel
-from calib.position_error import error_norms, stats_mm
+from calib.identify import model_from_files
+from calib.prior import PriorSpec
+from calib.result_file import load_result, write_result
 from calib.verdict import (
     DEFAULT_MAX_RATIO,
     EXIT_BAD_INPUT,
+    EXIT_OK,
     EXIT_POOR_FIT,
     Verdict,
-    declared_accuracy,
-    implausible_estimates,
-    judge_fit,
+)
+from calib.workflow import (
+    CalibrationRun,
+    FitFailed,
+    calibrate,
+    rejected_rows,
+    result_content,
+    verify_result,
 )
 from twin.exceptions import TwinError
 
@@ -74,52 +82,11 @@ def positive_int(text: str) -> int:
     return value
 
 
-def _kept_mask(result: IdentificationResult, shape: tuple[int, int]) -> np.ndarray:
-    keep = np.ones(shape, dtype=bool)
-    for r in getattr(result, "rejected", ()):
-        keep[r.pose_index, r.target_index] = False
-    return keep
-
-
-def _rejected_rows(result: IdentificationResult, dataset: Dataset, obs_targets: tuple[str, ...]):
-    return [
-        {
-            "pose_id": int(dataset.pose_ids[r.pose_index]),
-            "target": obs_targets[r.target_index],
-            "residual_mm": float(r.residual_m * 1e3),
-        }
-        for r in getattr(result, "rejected", ())
-    ]
-
-
-def fit_verdict(
-    model: CalibrationModel,
-    obs: Observations,
-    result: IdentificationResult,
-    dataset: Dataset,
-    sigma_mm: float | None,
-    max_ratio: float,
-) -> tuple[Verdict, dict[str, Any]]:
-    """The verdict on a fit and the 3D residual statistics of the kept readings."""
-    pred = model.predict(result.values, obs.commands).targets
-    norms = error_norms(obs.measured, pred)
-    keep = _kept_mask(result, norms.shape)
-    stats = stats_mm(norms[keep])
-    accuracy = declared_accuracy(sigma_mm, dataset.tracker)
-    message = getattr(result, "convergence_message", "") or (
-        f"stopped after {result.iterations} iterations without the step or the cost change "
-        "falling below its tolerance"
-    )
-    odd = implausible_estimates(
-        result.names, model.params.to_display(result.values), model.params.is_angle
-    )
-    verdict = judge_fit(stats.rms_mm, result.converged, message, accuracy, max_ratio, (), odd)
-    if not verdict.ok:
-        hints = likely_causes(model, obs.commands, obs.measured, model.nominal.target_names)
-        verdict = judge_fit(
-            stats.rms_mm, result.converged, message, accuracy, max_ratio, tuple(hints), odd
-        )
-    return verdict, stats.as_dict()
+def prior_spec(text: str) -> PriorSpec:
+    try:
+        return PriorSpec.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _print_verdict(verdict: Verdict) -> None:
@@ -129,123 +96,143 @@ def _print_verdict(verdict: Verdict) -> None:
         print(f"  likely cause: {hint}", file=stream)
 
 
-def _explain(model: CalibrationModel, obs: Observations, text: str) -> int:
-    """Print the failure with the likely causes the data shows; exit 4 with a cause, else 2."""
-    print(text, file=sys.stderr)
-    hints = likely_causes(model, obs.commands, obs.measured, model.nominal.target_names)
-    for hint in hints:
+def _failed(exc: FitFailed) -> int:
+    print(f"FAILED: {exc}", file=sys.stderr)
+    for hint in exc.hints:
         print(f"  likely cause: {hint}", file=sys.stderr)
-    return EXIT_POOR_FIT if hints else EXIT_BAD_INPUT
+    return EXIT_POOR_FIT if exc.poor_data else EXIT_BAD_INPUT
 
 
-def _identify_or_explain(
-    model: CalibrationModel,
-    obs: Observations,
-    unidentifiable: str,
-    max_iterations: int | None,
-) -> IdentificationResult | int:
-    """The fit, or the exit code after explaining why there is none."""
-    kwargs: dict[str, Any] = {"unidentifiable": unidentifiable}
-    if max_iterations is not None:
-        kwargs["options"] = LMOptions(max_iterations=max_iterations)
+def _run(args: argparse.Namespace) -> CalibrationRun | int:
+    model = model_from_files(args.model, args.errors)
+    dataset = read_dataset(args.data, expected_model=model.nominal.name)
     try:
-        return identify(model, obs, **kwargs)
-    except _too_many_outliers() as exc:
-        _explain(model, obs, f"FAILED: {exc}")
-        return EXIT_POOR_FIT
-    except TwinError as exc:
-        return _explain(model, obs, f"error: the model cannot follow the data: {exc}")
+        return calibrate(
+            model,
+            dataset,
+            set_name=args.set,
+            sigma_mm=args.sigma_mm,
+            max_ratio=args.max_ratio,
+            max_iterations=args.max_iterations,
+            unidentifiable="raise" if getattr(args, "require_all", False) else "fix",
+            prior_spec=getattr(args, "prior_std", None),
+        )
+    except FitFailed as exc:
+        return _failed(exc)
 
 
-def _too_many_outliers() -> tuple[type[Exception], ...]:
-    from calib import exceptions
-
-    cls = getattr(exceptions, "TooManyOutliersError", None)
-    return (cls,) if cls is not None else ()
+def _print_run(run: CalibrationRun) -> None:
+    res, params = run.result, run.model.params
+    print(run.selection)
+    if run.model.nominal.masses_defaulted:
+        print("the model declares no masses: MuJoCo's bounded defaults used (kinematics only)")
+    print(res.report.summary())
+    r = run.residual
+    print(
+        f"3D position error per reading after the fit ({r['n']} readings): RMS "
+        f"{r['rms_mm']:.4f} mm, mean {r['mean_mm']:.4f} mm, max {r['max_mm']:.4f} mm; "
+        f"{res.iterations} iterations, converged: {res.converged}"
+    )
+    rows = rejected_rows(run)
+    if rows:
+        print(f"{len(rows)} reading(s) rejected as gross outliers:")
+        for row in rows:
+            print(f"  pose {row['pose_id']} target {row['target']}: {row['residual_mm']:.3f} mm")
+    if res.registration is not None:
+        reg = res.registration.as_dict(res.registration_std)
+        t, s = reg["translation_mm"], reg["std_translation_mm"]
+        print(
+            "tracker registration (tracker origin in the base frame): "
+            + ", ".join(f"{v:.3f} +- {e:.4f}" for v, e in zip(t, s, strict=True))
+            + " mm; rotation (rpy) "
+            + ", ".join(f"{v:.4f}" for v in reg["rotation_rpy_deg"])
+            + " deg"
+        )
+    shown, std = params.to_display(res.values), params.to_display(res.std_errors)
+    weak = {w["name"] for w in run.weak}
+    for name, v, s, ang, est in zip(
+        res.names, shown, std, params.is_angle, res.estimated, strict=True
+    ):
+        unit = "deg" if ang else "mm"
+        if est:
+            tail = f"+- {s:.4f}" + ("  weakly identified" if name in weak else "")
+        else:
+            tail = f"(fixed at 0: {res.report.unidentifiable.get(name, 'not identifiable')})"
+        print(f"  {name:32s} {v:+10.4f} {unit:3s} {tail}")
+    if run.weak:
+        print(
+            f"{len(run.weak)} parameter(s) weakly identified (standard error above half the "
+            "prior range); consider --prior-std or more poses over a larger volume"
+        )
+    for group in run.groups[:5]:
+        print(f"  near-collinear (|r| > 0.95): {', '.join(group)}")
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
-    model = model_from_files(args.model, args.errors)
-    dataset = read_dataset(args.data, expected_model=model.nominal.name)
-    obs = bind_dataset(model.nominal, dataset)
-    result = _identify_or_explain(
-        model, obs, "fix" if args.fix_unidentifiable else "raise", args.max_iterations
-    )
-    if isinstance(result, int):
-        return result
-    verdict, residual = fit_verdict(model, obs, result, dataset, args.sigma_mm, args.max_ratio)
-    shown = model.params.to_display(result.values)
-    std = model.params.to_display(result.std_errors)
-    units = ["deg" if a else "mm" for a in model.params.is_angle]
-    rejected = _rejected_rows(result, dataset, model.nominal.target_names)
-    print(result.report.summary())
-    print(
-        f"3D position error per reading after the fit ({residual['n']} readings): "
-        f"RMS {residual['rms_mm']:.4f} mm, mean {residual['mean_mm']:.4f} mm, "
-        f"max {residual['max_mm']:.4f} mm; {result.iterations} iterations, "
-        f"converged: {result.converged}"
-    )
-    if rejected:
-        print(f"{len(rejected)} reading(s) rejected as gross outliers:")
-        for row in rejected:
-            print(
-                f"  pose {row['pose_id']} target {row['target']}: "
-                f"residual {row['residual_mm']:.3f} mm"
-            )
-    for name, v, s, u, est in zip(result.names, shown, std, units, result.estimated, strict=True):
-        tail = f"+- {s:.4f}" if est else "(not identifiable: kept at 0)"
-        print(f"  {name:32s} {v:+10.4f} {u:3s} {tail}")
-    _print_verdict(verdict)
+    run = _run(args)
+    if isinstance(run, int):
+        return run
+    _print_run(run)
+    _print_verdict(run.verdict)
     if args.out:
-        write_json_atomic(
-            Path(args.out),
-            {
-                "model": model.nominal.name,
-                "data": str(args.data),
-                "n_poses": dataset.n_poses,
-                "residual": residual,
-                "residual_rms_mm": residual["rms_mm"],
-                "converged": result.converged,
-                "iterations": result.iterations,
-                "verdict": verdict.as_dict(),
-                "rejected": rejected,
-                "n_identifiable": result.report.n_identifiable,
-                "unidentifiable": result.report.unidentifiable,
-                "parameters": {
-                    n: {"value": float(v), "std": None if not e else float(s), "unit": u}
-                    for n, v, s, u, e in zip(
-                        result.names, shown, std, units, result.estimated, strict=True
-                    )
-                },
-            },
-        )
-    return verdict.exit_code
+        write_result(args.out, result_content(run, args.model, args.errors, args.data))
+    return run.verdict.exit_code
+
+
+def _csv_text(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    model = model_from_files(args.model, args.errors)
+    loaded = load_result(args.result, expected_model=model.nominal.name)
+    dataset = read_dataset(args.data, expected_model=model.nominal.name)
+    v, selection = verify_result(model, loaded, dataset, args.set)
+    print(selection)
+    print(v.note)
+    for side in ("before", "after"):
+        s = getattr(v, side)
+        line = f"{side:6s}: 3D position error per reading {s.position.describe()}"
+        if s.orientation_deg is not None:
+            o = s.orientation_deg
+            line += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
+        print(line)
+    if args.out:
+        out = Path(args.out)
+        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
+        write_json_atomic(out, {**content, **v.as_dict(), "selection": selection})
+        write_text_atomic(out.with_suffix(".csv"), _csv_text(v.rows()))
+        from calib.verify_figure import save_verification_png
+
+        save_verification_png(v, out.with_suffix(".png"))
+        print(f"wrote {out}, {out.with_suffix('.csv')} and {out.with_suffix('.png')}")
+    return EXIT_OK
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     from calib.diagnosis import diagnose
 
-    model = model_from_files(args.model, args.errors)
-    dataset = read_dataset(args.data, expected_model=model.nominal.name)
-    obs = bind_dataset(model.nominal, dataset)
-    result = _identify_or_explain(model, obs, "fix", args.max_iterations)
-    if isinstance(result, int):
-        return result
-    verdict, residual = fit_verdict(model, obs, result, dataset, args.sigma_mm, args.max_ratio)
-    if not verdict.ok:
+    run = _run(args)
+    if isinstance(run, int):
+        return run
+    if not run.verdict.ok:
         print(
             "the geometric fit the diagnosis starts from is not usable; fix the data first",
             file=sys.stderr,
         )
-        _print_verdict(verdict)
-        return verdict.exit_code
-    head = (dataset.tracker or {}).get("position_mm")
+        _print_verdict(run.verdict)
+        return run.verdict.exit_code
+    head = (run.dataset.tracker or {}).get("position_mm")
     diag = diagnose(
-        model,
-        obs,
-        result,
+        run.model,
+        run.obs,
+        run.result,
         args.sigma_mm * 1e-3,
-        order=dataset.order,
+        order=run.dataset.order,
         tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
     )
     print(
@@ -259,23 +246,33 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         write_json_atomic(
             Path(args.out),
             {
-                "residual": residual,
+                "residual": run.residual,
                 "residual_rms_mm_per_coordinate": diag.residual_rms_mm,
                 "noise_floor_rms_mm_per_coordinate": diag.noise_floor_rms_mm,
                 "chi2_p_value": diag.chi2_p_value,
                 "diagnosed_effect": diag.chosen,
                 "reason": diag.reason,
-                "rejected": _rejected_rows(result, dataset, model.nominal.target_names),
+                "rejected": rejected_rows(run),
                 "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
                 "effect_parameters": {n: v.tolist() for n, v in diag.coefficients.items()},
             },
         )
-    return 0
+    return EXIT_OK
 
 
-def _common(p: argparse.ArgumentParser) -> None:
+def _model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, help="nominal MJCF of the machine")
     p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
+    p.add_argument("--data", required=True, help="Dataset CSV (with its .json sidecar)")
+    p.add_argument("--out", help="write the result as JSON here (atomically)")
+
+
+def _fit_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--set",
+        help="use the rows of this set (the 'set' column); default: the rows marked "
+        "'calibration', or all rows when no row is",
+    )
     p.add_argument(
         "--max-ratio",
         type=ratio_float,
@@ -283,7 +280,6 @@ def _common(p: argparse.ArgumentParser) -> None:
         help="fail (exit 4) when the 3D RMS residual exceeds this many times the noise the "
         f"tracker accuracy explains (default {DEFAULT_MAX_RATIO:g})",
     )
-    p.add_argument("--out", help="write the result as JSON here (atomically)")
     p.add_argument(
         "--max-iterations",
         type=positive_int,
@@ -299,8 +295,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     ident = sub.add_parser("identify", help="identify geometric errors from a tracker dataset")
-    _common(ident)
-    ident.add_argument("--data", required=True, help="Dataset CSV (with its .json sidecar)")
+    _model_options(ident)
+    _fit_options(ident)
     ident.add_argument(
         "--sigma-mm",
         type=positive_float,
@@ -308,19 +304,31 @@ def build_parser() -> argparse.ArgumentParser:
         "else 0.05 mm assumed",
     )
     ident.add_argument(
+        "--prior-std",
+        type=prior_spec,
+        help="a Gaussian prior of zero mean on the errors, per kind: length=MM,angle=DEG "
+        "(keeps weakly identified parameters physical)",
+    )
+    ident.add_argument(
+        "--require-all",
+        action="store_true",
+        help="stop (exit 2) if the poses cannot identify every parameter, instead of keeping "
+        "those at zero and saying why",
+    )
+    ident.add_argument(
         "--fix-unidentifiable",
         action="store_true",
-        help="keep parameters the poses cannot identify at zero instead of stopping",
+        help="(the default now) keep unidentifiable parameters at zero",
     )
+    ver = sub.add_parser("verify", help="score a dataset before and after a calibration")
+    _model_options(ver)
+    ver.add_argument("--result", required=True, help="result JSON written by identify --out")
+    ver.add_argument("--set", help="score the rows of this set (default: all rows)")
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
     )
-    _common(diag)
-    diag.add_argument(
-        "--data",
-        required=True,
-        help="Dataset CSV (rows in measurement order or with an 'order' column)",
-    )
+    _model_options(diag)
+    _fit_options(diag)
     diag.add_argument(
         "--sigma-mm",
         type=positive_float,
@@ -330,12 +338,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        if args.command == "diagnose":
-            return cmd_diagnose(args)
-        return cmd_identify(args)
+        return COMMANDS[args.command](args)
     except (DatasetError, CalibError, TwinError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

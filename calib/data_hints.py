@@ -14,6 +14,7 @@ import numpy as np
 
 from calib.model import CalibrationModel
 from calib.position_error import error_norms
+from calib.registration import RegistrationError, initial_registration
 from twin.exceptions import TwinError
 
 CLEAR_FACTOR = 3.0
@@ -27,7 +28,14 @@ UNIT_SCALES = {
 UNIT_RTOL = 0.05
 
 
-def _rms(measured: np.ndarray, predicted: np.ndarray) -> float:
+def _rms(measured: np.ndarray, predicted: np.ndarray, frame: str = "base") -> float:
+    """3D RMS of measured against predicted; tracker-frame readings are first carried into
+    the base frame by their closed-form rigid fit to the predictions."""
+    if frame == "tracker":
+        try:
+            measured = initial_registration(measured, predicted).to_base(measured)
+        except RegistrationError:
+            return float("inf")
     return float(np.sqrt(np.mean(error_norms(measured, predicted) ** 2)))
 
 
@@ -49,18 +57,21 @@ def unit_hint(measured: np.ndarray, predicted: np.ndarray) -> str | None:
 
 
 def target_label_hint(
-    measured: np.ndarray, predicted: np.ndarray, target_names: tuple[str, ...]
+    measured: np.ndarray,
+    predicted: np.ndarray,
+    target_names: tuple[str, ...],
+    frame: str = "base",
 ) -> str | None:
     """A permutation of the target labels that makes the residual clearly smaller."""
     t = measured.shape[1]
     if t < 2 or t > 5:
         return None
-    base = _rms(measured, predicted)
+    base = _rms(measured, predicted, frame)
     best, best_perm = base, None
     for perm in itertools.permutations(range(t)):
         if perm == tuple(range(t)):
             continue
-        r = _rms(measured[:, perm, :], predicted)
+        r = _rms(measured[:, perm, :], predicted, frame)
         if r < best:
             best, best_perm = r, perm
     if best_perm is None or best * CLEAR_FACTOR > base:
@@ -79,11 +90,12 @@ def actuator_order_hint(
     commands: np.ndarray,
     measured: np.ndarray,
     actuator_names: tuple[str, ...],
+    frame: str = "base",
 ) -> str | None:
     """Two actuator columns whose exchange makes the nominal residual clearly smaller."""
     x0 = np.zeros(model.n_parameters)
     try:
-        base = _rms(measured, model.predict(x0, commands).targets)
+        base = _rms(measured, model.predict(x0, commands).targets, frame)
     except TwinError:
         base = np.inf
     best, best_pair = base, None
@@ -91,7 +103,7 @@ def actuator_order_hint(
         swapped = commands.copy()
         swapped[:, [i, j]] = swapped[:, [j, i]]
         try:
-            r = _rms(measured, model.predict(x0, swapped).targets)
+            r = _rms(measured, model.predict(x0, swapped).targets, frame)
         except TwinError:
             continue
         if r < best:
@@ -111,6 +123,7 @@ def likely_causes(
     commands: np.ndarray,
     measured: np.ndarray,
     target_names: tuple[str, ...],
+    frame: str = "base",
 ) -> list[str]:
     """Every hint that the data shows, most specific first (nominal model, cold starts)."""
     model = CalibrationModel(model.nominal, model.params)  # no warm start from a failed fit
@@ -123,11 +136,11 @@ def likely_causes(
     if nominal is not None:
         for hint in (
             unit_hint(measured, nominal),
-            target_label_hint(measured, nominal, target_names),
+            target_label_hint(measured, nominal, target_names, frame),
         ):
             if hint:
                 hints.append(hint)
-    hint = actuator_order_hint(model, commands, measured, model.nominal.actuator_names)
+    hint = actuator_order_hint(model, commands, measured, model.nominal.actuator_names, frame)
     if hint:
         hints.append(hint)
     return hints

@@ -138,7 +138,7 @@ class IdentificationResult:
         measured = (
             obs.measured if self.registration is None else self.registration.to_base(obs.measured)
         )
-        pred = CalibrationModel(model.nominal, model.params).predict(self.values, obs.commands)
+        pred = model.predict(self.values, obs.commands)  # warm from the fit's own solves
         return np.linalg.norm(measured - pred.targets, axis=-1)
 
 

@@ -525,6 +525,39 @@ SCHEMAS: dict[str, Table] = {
             }
         ),
     ),
+    "serial_arm": _base(
+        seed=_SEED,
+        truth=Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
+        tracker=Table(
+            {
+                "position_mm": Key(list, required=True, item=float, length=3),
+                "rotation_deg": Key(list, required=True, item=float, length=3),
+                "noise": Key(str, required=True, check=_check_noise_spec),
+                "sigma_mm": Key(float, required=True, above=0),
+            },
+            required=True,
+        ),
+        plan=Table(
+            {
+                "calibration_poses": _COUNT,
+                "test_poses": _COUNT,
+                "joint_fraction": Key(float, required=True, above=0, max=1),
+            },
+            required=True,
+        ),
+        variants=Table(
+            {
+                "three_reflectors": Table(
+                    {
+                        "model": Key(str, required=True, path=True),
+                        "error_model": Key(str, required=True, path=True),
+                    },
+                    required=True,
+                )
+            },
+            required=True,
+        ),
+    ),
     "undeclared_effect": _base(
         seed=_SEED,
         truth=_truth(

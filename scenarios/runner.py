@@ -37,6 +37,7 @@ STUDIES = {
     "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
     "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
     "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
+    "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
 }
 
 

@@ -243,8 +243,8 @@ def test_dataset_must_match_the_model(hexapod):
     bind_dataset(hexapod, _dataset())
     with pytest.raises(DatasetError, match=r"actuator 'leg1' is prismatic.*'deg'"):
         bind_dataset(hexapod, _dataset(units=("deg",) + ("mm",) * 5))
-    with pytest.raises(DatasetError, match="frame is 'tracker'"):
-        bind_dataset(hexapod, _dataset(frame="tracker"))
+    with pytest.raises(DatasetError, match="frame is 'lab'"):
+        bind_dataset(hexapod, _dataset(frame="lab"))
     with pytest.raises(DatasetError, match="leg6"):
         bind_dataset(
             hexapod, _dataset(units=("mm",) * 5, actuators=tuple(f"leg{i}" for i in range(1, 6)))
