@@ -26,6 +26,7 @@ import csv
 import io
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -227,9 +228,12 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         _print_verdict(run.verdict)
         return run.verdict.exit_code
     head = (run.dataset.tracker or {}).get("position_mm")
+    obs = run.obs
+    if run.result.registration is not None:  # the diagnosis works in the base frame
+        obs = replace(obs, measured=run.result.registration.to_base(obs.measured), frame="base")
     diag = diagnose(
         run.model,
-        run.obs,
+        obs,
         run.result,
         args.sigma_mm * 1e-3,
         order=run.dataset.order,
@@ -240,6 +244,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         f"{diag.noise_floor_rms_mm:.4f} mm per coordinate; chi-square p = {diag.chi2_p_value:.3g}"
     )
     print(f"diagnosis: {diag.chosen} ({diag.reason})")
+    for note in diag.notes:
+        print(f"  note: {note}")
     for name, score in diag.scores.items():
         print(f"  {name:24s} held-out RMS {score.heldout_rms_mm:.5f} mm, BIC {score.bic:.1f}")
     if args.out:
@@ -252,6 +258,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                 "chi2_p_value": diag.chi2_p_value,
                 "diagnosed_effect": diag.chosen,
                 "reason": diag.reason,
+                "notes": list(diag.notes),
                 "rejected": rejected_rows(run),
                 "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
                 "effect_parameters": {n: v.tolist() for n, v in diag.coefficients.items()},

@@ -77,13 +77,27 @@ def _gravity(model, values, commands, order):
     return -tau[:, :, None] * np.eye(a)[None, :, :]  # compliance per actuator (m/N)
 
 
-def default_candidates(actuators: tuple[str, ...], pitches_m: tuple[float, ...] = (5e-3,)):
-    """The library: thermal growth, backlash, lead error per pitch, gravity compliance."""
+GRAVITY_SKIPPED = (
+    "gravity_compliance skipped: the model declares no masses (MuJoCo's bounded defaults), so "
+    "its gravity loads would be invented"
+)
+
+
+def default_candidates(
+    actuators: tuple[str, ...],
+    pitches_m: tuple[float, ...] = (5e-3,),
+    masses_defaulted: bool = False,
+):
+    """The library: thermal growth, backlash, lead error per pitch, gravity compliance (not
+    on a model whose masses were defaulted)."""
     out = [
         Candidate("thermal_growth", ("growth_per_pose",), _thermal),
         Candidate("backlash", tuple(f"{a}.half_play" for a in actuators), _backlash),
-        Candidate("gravity_compliance", tuple(f"{a}.compliance" for a in actuators), _gravity),
     ]
+    if not masses_defaulted:
+        out.append(
+            Candidate("gravity_compliance", tuple(f"{a}.compliance" for a in actuators), _gravity)
+        )
     for p in pitches_m:
         names = tuple(f"{a}.lead_{c}" for c in ("sin", "cos") for a in actuators)
         out.append(Candidate(f"lead_error_{p * 1e3:g}mm", names, _lead(p)))
@@ -112,6 +126,7 @@ class Diagnosis:
     coefficients: dict[str, np.ndarray] = field(default_factory=dict)  # effect parameters
     structure: dict[str, float] = field(default_factory=dict)  # rank correlations
     geometry_correction: np.ndarray | None = None  # for the estimated geometric parameters
+    notes: tuple[str, ...] = ()  # candidates skipped, and why
 
 
 def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
@@ -136,6 +151,11 @@ def _fit(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     scale = np.linalg.norm(x, axis=0)
     scale[scale == 0] = 1.0
     return np.linalg.lstsq(x / scale, y, rcond=None)[0] / scale
+
+
+def _library(model: CalibrationModel) -> list[Candidate]:
+    mech = model.nominal
+    return default_candidates(mech.actuator_names, masses_defaulted=mech.masses_defaulted)
 
 
 def diagnose(
@@ -172,7 +192,7 @@ def diagnose(
     geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p) * rows
     j_act = actuator_jacobians(model, values, pred.qpos)  # (N, T*3, A)
     blocks = {"none": np.zeros((n_poses, r.shape[1], 0))}
-    for c in candidates or default_candidates(model.nominal.actuator_names):
+    for c in candidates or _library(model):
         d = c.regressor(model, values, obs.commands, order)  # (N, A, k)
         blocks[c.name] = np.einsum("nra,nak->nrk", j_act, d) * rows
     if tracker_position_m is not None:
@@ -203,6 +223,7 @@ def diagnose(
         chi2_p_value=p_value,
         excess=excess,
         scores=scores,
+        notes=(GRAVITY_SKIPPED,) if candidates is None and model.nominal.masses_defaulted else (),
     )
     if not excess:
         return Diagnosis(**common, reason="the residual is what the tracker noise explains")
@@ -247,7 +268,7 @@ def effect_offsets(
     candidates: list[Candidate] | None = None,
 ) -> np.ndarray:
     """Actuator offsets (N, A) that the chosen effects predict for these commands."""
-    library = {c.name: c for c in candidates or default_candidates(model.nominal.actuator_names)}
+    library = {c.name: c for c in candidates or _library(model)}
     out = np.zeros_like(np.asarray(commands, dtype=float))
     for name, theta in chosen.items():
         out += np.einsum(

@@ -75,7 +75,7 @@ def load_machine(scenario: Scenario, rng: np.random.Generator) -> ScenarioMachin
     or, without it, a seeded draw from ``[truth.random]``."""
     nominal, params = load_nominal(scenario)
     truth_values = load_truth_values(scenario, params, rng)
-    truth = Mechanism(params.inject(nominal.model, truth_values), name=nominal.name)
+    truth = nominal.with_model(params.inject(nominal.model, truth_values))
     return ScenarioMachine(nominal, params, truth_values, truth)
 
 

@@ -156,3 +156,17 @@ def test_non_convergence_exits_3_and_says_which_criterion(arm_run, capsys):
     code = main(["identify", *_args(out / "datasets/one_reflector.csv", "--max-iterations", "1")])
     assert code == 3
     assert "did not converge (iteration limit)" in capsys.readouterr().err
+
+
+def test_diagnosis_skips_gravity_on_defaulted_masses_and_works_in_the_tracker_frame(
+    arm_run, tmp_path, capsys
+):
+    _, out = arm_run
+    d = tmp_path / "d.json"
+    data = out / "datasets/one_reflector.csv"
+    assert main(["diagnose", *_args(data, "--sigma-mm", "0.021", "--out", str(d))]) == 0
+    result = json.loads(d.read_text())
+    assert "gravity_compliance" not in result["candidates"]
+    assert any("no masses" in n for n in result["notes"])
+    # registered into the base frame, the residual is the tracker noise: nothing invented
+    assert result["diagnosed_effect"] == "none"
