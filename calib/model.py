@@ -2,7 +2,7 @@
 
 It predicts tracker-target positions for actuator commands under given parameter values
 (closed-chain forward kinematics of the injected model) and their identification Jacobian
-(implicit-function form over the closed chain, twin.sensitivity).
+(implicit-function form over the closed chain, all poses at once: twin.sensitivity_batch).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
-from twin.sensitivity import target_jacobian
+from twin.sensitivity_batch import JacobianPlan, target_jacobian_batch
 
 
 @dataclass(frozen=True)
@@ -32,6 +32,7 @@ class CalibrationModel:
         self._cache_key: bytes | None = None
         self._cache_mech: Mechanism | None = None
         self._warm: tuple[bytes, np.ndarray] | None = None
+        self._plan = JacobianPlan.for_mechanism(nominal)
 
     @property
     def n_parameters(self) -> int:
@@ -61,4 +62,4 @@ class CalibrationModel:
     def jacobian(self, values: np.ndarray, prediction: Prediction) -> np.ndarray:
         """d(targets)/d(values), (P*T*3, n), rows ordered as ``targets.reshape(-1)``."""
         mech = self.mechanism(values)
-        return np.vstack([target_jacobian(mech, self.params, values, q) for q in prediction.qpos])
+        return target_jacobian_batch(mech, self.params, values, prediction.qpos, self._plan)

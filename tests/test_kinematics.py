@@ -16,9 +16,10 @@ from twin.closure import (
     closure_sites,
     update_kinematics,
 )
+from twin.dof_axes import DofAxes
 from twin.exceptions import ClosureError, ModelError, WorkspaceError
 from twin.kinematics import forward, inverse, pose_to_frame
-from twin.kinematics_batch import _DofAxes, forward_batch
+from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.rotations import rotvec_from_matrix, rpy_from_matrix
 from twin.workspace import random_poses
@@ -185,7 +186,7 @@ def test_numpy_jacobian_equals_mujoco_jacobian(hexapod, reachable):
     a, b = closure_sites(hexapod)
     sites = np.concatenate([a, b])
     frames = _frames(hexapod, configurations)
-    axes = _DofAxes(hexapod.model, sites, free)
+    axes = DofAxes(hexapod.model, sites, free)
     numpy_jac = axes.closure_jacobian(
         hexapod,
         frames["xaxis"],

@@ -18,6 +18,7 @@ import numpy as np
 from mujoco.batch import Batch
 
 from twin.closure import closure_sites
+from twin.dof_axes import DofAxes
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import ACCEPT, MAX_ITER, MAX_STEP, TOLERANCE, check_commands
 from twin.mechanism import Mechanism
@@ -69,114 +70,7 @@ def _residual(mech: Mechanism, xpos: np.ndarray, xmat: np.ndarray) -> np.ndarray
     return np.concatenate(rows, axis=1)
 
 
-class _DofAxes:
-    """Per-dof motion axes of a model, for Jacobians computed in numpy from frames."""
-
-    def __init__(self, model: mujoco.MjModel, sites: np.ndarray, free: np.ndarray) -> None:
-        nv = model.nv
-        free_mask = np.zeros(nv, dtype=bool)
-        free_mask[free] = True
-        self.joint = model.dof_jntid.copy()
-        self.body = model.dof_bodyid.copy()
-        self.kind = np.zeros(nv, dtype=int)  # 0 axis from xaxis, 1 world unit, 2 body column
-        self.column = np.zeros(nv, dtype=int)
-        self.is_rot = np.zeros(nv, dtype=bool)
-        for d in range(nv):
-            j = self.joint[d]
-            jt, k = int(model.jnt_type[j]), d - model.jnt_dofadr[j]
-            if jt == FREE:
-                self.kind[d], self.column[d], self.is_rot[d] = (
-                    (1, k, False) if k < 3 else (2, k - 3, True)
-                )
-            elif jt == BALL:
-                self.kind[d], self.column[d], self.is_rot[d] = 2, k, True
-            else:
-                self.is_rot[d] = jt == int(mujoco.mjtJoint.mjJNT_HINGE)
-        # mask[s, d]: dof d moves site s (its body is an ancestor-or-self of the site's body)
-        parent = model.body_parentid
-        self.mask = np.zeros((len(sites), nv), dtype=bool)
-        for i, s in enumerate(sites):
-            b, chain = int(model.site_bodyid[s]), set()
-            while True:
-                chain.add(b)
-                if b == 0:
-                    break
-                b = int(parent[b])
-            self.mask[i] = np.isin(self.body, list(chain))
-        self.pairs = np.nonzero(self.mask & free_mask[None, :])
-        self.scatter: list | None = None
-
-    def closure_jacobian(
-        self,
-        mech: Mechanism,
-        xaxis: np.ndarray,
-        xanchor: np.ndarray,
-        xmat: np.ndarray,
-        p: np.ndarray,
-        free: np.ndarray,
-    ) -> np.ndarray:
-        """d(closure residual)/d(free dofs), (N, n_closure, n_free), from frames of N poses.
-
-        ``p`` (N, S, 3) are the positions of the sites given at construction (all first
-        sites of the closures, then all second sites); only (site, dof) pairs where the
-        dof moves the site are computed, and scattered straight into their rows.
-        """
-        n = len(p)
-        site, dof = self.pairs
-        joint = self.joint[dof]
-        axes = xaxis[:, joint].copy()  # (N, P, 3)
-        unit = self.kind[dof] == 1
-        axes[:, unit] = np.eye(3)[self.column[dof][unit]]
-        col = self.kind[dof] == 2
-        if np.any(col):
-            rot_t = np.swapaxes(xmat.reshape(n, -1, 3, 3), 2, 3)  # rows = frame axes
-            axes[:, col] = rot_t[:, self.body[dof][col], self.column[dof][col]]
-        rot_pair = self.is_rot[dof]
-        lin = axes.copy()
-        lever = p[:, site[rot_pair]] - xanchor[:, joint[rot_pair]]
-        lin[:, rot_pair] = _cross(axes[:, rot_pair], lever)
-        if self.scatter is None:
-            self.scatter = _scatter_plan(mech, site, dof, rot_pair, free)
-        out = np.zeros((n, mech.n_closure * len(free)))
-        for flat, pick, sign, use_rot in self.scatter:
-            vals = (axes if use_rot else lin)[:, pick]  # (N, k, 3)
-            out[:, flat] += sign * vals.reshape(n, -1)
-        return out.reshape(n, mech.n_closure, len(free))
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (cheaper than np.cross on small batched arrays)."""
-    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
-
-
-def _scatter_plan(mech, site, dof, rot_pair, free):
-    """Index lists that place (site, dof) Jacobian entries into closure rows and free columns."""
-    nc = len(mech.closures)
-    offsets = np.cumsum([0] + [c.size for c in mech.closures])
-    free_index = -np.ones(mech.model.nv, dtype=int)
-    free_index[free] = np.arange(len(free))
-    plan = []
-    for side, sign in ((0, 1.0), (1, -1.0)):
-        for use_rot in (False, True):
-            rows, cols, pick = [], [], []
-            for k in range(len(site)):
-                s, d = site[k], dof[k]
-                if (s >= nc) != bool(side) or free_index[d] < 0:
-                    continue
-                ci = s - side * nc
-                if use_rot and (mech.closures[ci].kind != "weld" or not rot_pair[k]):
-                    continue
-                base = offsets[ci] + (3 if use_rot else 0)
-                rows += [base, base + 1, base + 2]
-                cols += [free_index[d]] * 3
-                pick.append(k)
-            if pick:
-                flat = np.array(rows) * len(free) + np.array(cols)
-                plan.append((flat, np.array(pick), sign, use_rot))
-    return plan
-
-
-def _jacobian(mech: Mechanism, axes: _DofAxes, frames: dict, ids: np.ndarray) -> np.ndarray:
+def _jacobian(mech: Mechanism, axes: DofAxes, frames: dict, ids: np.ndarray) -> np.ndarray:
     a, b = closure_sites(mech)
     p = frames["site_xpos"][ids][:, np.concatenate([a, b])]
     return axes.closure_jacobian(
@@ -246,7 +140,7 @@ def forward_batch(
     def work(k: int) -> int:
         batch = Batch(m, nsim=min(n, CHUNK), nthread=1)
         bound = {f: batch.bind(f) for f in ("qpos", *FIELDS)}
-        axes = _DofAxes(m, np.concatenate([a, b]), mech.free_dofs())
+        axes = DofAxes(m, np.concatenate([a, b]), mech.free_dofs())
         its = 0
         for sl in chunks[k::workers]:
             chunk = {f: frames[f][sl] for f in frames}
@@ -296,7 +190,7 @@ def _solve_chunk(
     mech: Mechanism,
     batch: Batch,
     bound: dict,
-    axes: _DofAxes,
+    axes: DofAxes,
     qpos: np.ndarray,
     residual: np.ndarray,
     frames: dict,

@@ -223,6 +223,62 @@ class ParameterSet:
                 t[k] = data.xaxis[i]
         return t, w, o
 
+    def screws_batch(
+        self, model: mujoco.MjModel, frames: dict[str, np.ndarray], values: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`screws` for N poses at once, each (N, n, 3), from their frames
+        (``xpos``, ``xmat``, ``xaxis``, ``xanchor`` with a leading pose axis)."""
+        xpos, xaxis, xanchor = frames["xpos"], frames["xaxis"], frames["xanchor"]
+        xmat = frames["xmat"].reshape(len(xpos), -1, 3, 3)
+        n_pose, n = len(xpos), len(self)
+        t, w, o = (np.zeros((n_pose, n, 3)) for _ in range(3))
+        kind, el, axis = self.kind, self.element, self.axis
+        k0 = np.flatnonzero(kind == 0)
+        t[:, k0] = np.einsum("pkij,kj->pki", xmat[:, model.body_parentid[el[k0]]], axis[k0])
+        k1 = np.flatnonzero(kind == 1)
+        if k1.size:
+            rotvecs = self.rotation_vectors(np.asarray(values, dtype=float))
+            local = np.array(
+                [left_jacobian_so3(rotvecs[int(el[k])]) @ axis[k] for k in k1]
+            ).reshape(-1, 3)
+            par = model.body_parentid[el[k1]]
+            w[:, k1] = np.einsum("pkij,kj->pki", xmat[:, par], local)
+            o[:, k1] = xpos[:, par] + np.einsum(
+                "pkij,kj->pki", xmat[:, par], model.body_pos[el[k1]]
+            )
+        k2 = np.flatnonzero(kind == 2)
+        t[:, k2] = np.einsum("pkij,kj->pki", xmat[:, model.site_bodyid[el[k2]]], axis[k2])
+        k3 = np.flatnonzero(kind == 3)
+        hinge, slide = k3[self.is_angle[k3]], k3[~self.is_angle[k3]]
+        w[:, hinge] = xaxis[:, el[hinge]]
+        o[:, hinge] = xanchor[:, el[hinge]]
+        t[:, slide] = xaxis[:, el[slide]]
+        return t, w, o
+
+    def site_derivatives_batch(
+        self,
+        model: mujoco.MjModel,
+        site_xpos: np.ndarray,
+        sites: np.ndarray,
+        screws: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`site_derivatives` for N poses: dp and dw, each (N, S, 3, n); ``site_xpos``
+        (N, nsite, 3) and ``screws`` from :meth:`screws_batch`."""
+        t, w, o = screws
+        sites = np.asarray(sites, dtype=int)
+        p = site_xpos[:, sites]  # (N, S, 3)
+        affected = self.subtree[:, model.site_bodyid[sites]].T.copy()  # (S, n)
+        site_kind = self.kind == 2
+        affected[:, site_kind] = sites[:, None] == self.element[site_kind][None, :]
+        lever = p[:, :, None, :] - o[:, None, :, :]  # (N, S, n, 3)
+        wn = w[:, None, :, :]
+        cross = (
+            wn[..., [1, 2, 0]] * lever[..., [2, 0, 1]] - wn[..., [2, 0, 1]] * lever[..., [1, 2, 0]]
+        )
+        dp = (t[:, None, :, :] + cross) * affected[None, :, :, None]
+        dw = np.broadcast_to(wn, dp.shape) * affected[None, :, :, None]
+        return np.swapaxes(dp, 2, 3), np.swapaxes(dw, 2, 3)
+
     def site_derivatives(
         self,
         model: mujoco.MjModel,
