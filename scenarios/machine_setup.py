@@ -9,7 +9,19 @@ import numpy as np
 from calib.model import CalibrationModel
 from scenarios.config import Scenario, ScenarioError, values_file_problems
 from scenarios.truth_draw import TruthSpec, draw_truth
-from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
+from twin.effects import (
+    ActuatorGain,
+    Backlash,
+    GravityCompliance,
+    JointBacklash,
+    JointCompliance,
+    LeadError,
+    LeadErrorHarmonic,
+    ReflectorOffset,
+    ThermalGrowth,
+    ThermalWarmup,
+    TrackerAirTemperature,
+)
 from twin.exceptions import ModelError, ParameterError
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set, load_values
@@ -22,6 +34,13 @@ EFFECTS = {
     "backlash": Backlash,
     "lead_error": LeadError,
     "gravity_compliance": GravityCompliance,
+    "thermal_warmup": ThermalWarmup,
+    "lead_error_harmonic": LeadErrorHarmonic,
+    "joint_backlash": JointBacklash,
+    "joint_compliance": JointCompliance,
+    "actuator_gain": ActuatorGain,
+    "reflector_offset": ReflectorOffset,
+    "tracker_air_temperature": TrackerAirTemperature,
 }
 EFFECT_EXCLUDED_ARGS = ("name",)  # the effect's label in reports, not a physical argument
 

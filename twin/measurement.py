@@ -3,6 +3,8 @@
 The twin runs closed-chain forward kinematics of the (error-injected) mechanism, optionally
 perturbs the measured tool pose (the second paper's pose-noise model), places the targets,
 and passes them through the tracker (distance-dependent noise, repeats, scale error).
+Physical effects enter where their physics acts (see :mod:`twin.effects.base`): on the joint
+values, on the geometry at each pose in measurement order, on the reflectors, on the tracker.
 """
 
 from __future__ import annotations
@@ -12,7 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.effects.base import ActuatorEffect, apply_actuator_effects
+from twin.effects.base import (
+    Effect,
+    apply_actuator_effects,
+    check_effects,
+    model_at,
+    target_offsets,
+    tracker_with,
+)
 from twin.kinematics import check_commands
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
@@ -35,27 +44,60 @@ def check_commands_batch(mech: Mechanism, commands: np.ndarray) -> None:
             raise type(exc)(f"pose {k}: {exc}") from None
 
 
+def _models_per_pose(
+    truth: Mechanism, effects: Sequence[Effect], order: np.ndarray
+) -> list[tuple[Mechanism, np.ndarray]]:
+    """Groups of poses (indices) that share one geometry; one group when nothing changes."""
+    groups: dict[int, tuple[Mechanism, list[int]]] = {}
+    for i, k in enumerate(order):
+        mech = model_at(truth, effects, int(k))
+        groups.setdefault(id(mech), (mech, []))[1].append(i)
+    return [(mech, np.array(ids)) for mech, ids in groups.values()]
+
+
 def measure(
     truth: Mechanism,
     commands: np.ndarray,
     tracker: Tracker,
     rng: np.random.Generator,
     pose_noise: PoseNoise | None = None,
-    effects: Sequence[ActuatorEffect] = (),
+    effects: Sequence[Effect] = (),
     order: np.ndarray | None = None,
 ) -> Measurement:
     """Tracker readings of every target at every command row (N, A).
 
-    ``effects`` (thermal growth, lead error, backlash, gravity compliance, ...) turn the
-    commands into the joint values the machine really takes, in measurement ``order``.
+    ``effects`` (thermal growth and warm-up, lead error, backlash, gain, compliance,
+    reflector offsets, air temperature ...) turn the commands into the joint values the
+    machine really takes, the geometry into the one at each pose's time, the reflectors into
+    where they really sit and the tracker into how it really measures, in measurement
+    ``order`` (default: row order).
     """
     check_commands_batch(truth, commands)  # the commands must respect the strokes ...
+    check_effects(effects)
+    commands = np.atleast_2d(np.asarray(commands, dtype=float))
+    order = np.arange(len(commands)) if order is None else np.asarray(order)
     joints = apply_actuator_effects(truth, effects, commands, order) if effects else commands
-    sol = forward_batch(truth, joints, check_stroke=False)  # ... effects may nudge past them
-    targets = sol.targets
+    offsets = target_offsets(truth, effects)
+    n = len(commands)
+    true_r, true_p = np.zeros((n, 3, 3)), np.zeros((n, 3))
+    targets = np.zeros((n, truth.n_targets, 3))
+    groups = _models_per_pose(truth, effects, order)
+    for mech, ids in groups:
+        sol = forward_batch(mech, joints[ids], check_stroke=False)  # effects may nudge past
+        true_r[ids], true_p[ids] = sol.tool_rotation, sol.tool_position
+        targets[ids] = sol.targets
+    if np.any(offsets):
+        targets = targets + np.einsum("nij,tj->nti", true_r, offsets)
+    true_targets = targets
     if pose_noise is not None:
-        local = truth.target_local()
-        r_noisy, p_noisy = pose_noise.perturb(sol.tool_rotation, sol.tool_position, rng)
-        targets = np.einsum("nij,tj->nti", r_noisy, local) + p_noisy[:, None, :]
-    readings = tracker.measure(targets, rng)
-    return Measurement(readings, sol.targets, sol.tool_rotation, sol.tool_position)
+        r_noisy, p_noisy = pose_noise.perturb(true_r, true_p, rng)
+        if len(groups) == 1:
+            local = groups[0][0].target_local() + offsets
+            targets = np.einsum("nij,tj->nti", r_noisy, local) + p_noisy[:, None, :]
+        else:  # each pose's own (grown) tool
+            local = np.zeros((n, truth.n_targets, 3))
+            for mech, ids in groups:
+                local[ids] = mech.target_local() + offsets
+            targets = np.einsum("nij,ntj->nti", r_noisy, local) + p_noisy[:, None, :]
+    readings = tracker_with(tracker, effects).measure(targets, rng)
+    return Measurement(readings, true_targets, true_r, true_p)

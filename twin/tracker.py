@@ -167,6 +167,82 @@ class TrackerNoise:
         return rng.uniform(-1.0, 1.0, size=shape) * mag
 
 
+# ----------------------------------------------------------------- air and the distance scale
+
+_C_TO_K_EDLEN = 0.0036610  # 1/K, the modified Edlen temperature term
+
+
+def air_refractive_index(
+    temperature_C: float,
+    pressure_Pa: float = 101325.0,
+    water_vapour_Pa: float = 1170.0,
+    wavelength_m: float = 633e-9,
+) -> float:
+    """Phase refractive index of air, modified Edlen equation (Birch and Downs, Metrologia 30
+    (1993) 155 and 31 (1994) 315): dry air of standard composition, water vapour subtracted.
+
+    ``water_vapour_Pa``: partial pressure of water vapour (1170 Pa is 50 % humidity at 20 C).
+    At 20 C, 101325 Pa, 633 nm it gives n - 1 = 2.718e-4 dry and 2.714e-4 at 1170 Pa; dn/dT
+    is -0.93e-6 / K, dn/dp +2.7e-9 / Pa, and 117 Pa (10 % humidity) more vapour -0.04e-6.
+    """
+    t = float(temperature_C)
+    sigma2 = (1e-6 / float(wavelength_m)) ** 2  # (1/um)^2
+    ns = 1e-8 * (8342.54 + 2406147.0 / (130.0 - sigma2) + 15998.0 / (38.9 - sigma2))
+    p = float(pressure_Pa)
+    ntp = p * ns / 96095.43 * (1.0 + 1e-8 * (0.601 - 0.00972 * t) * p) / (1.0 + _C_TO_K_EDLEN * t)
+    f = float(water_vapour_Pa)
+    return 1.0 + ntp - f * (3.7345 - 0.0401 * sigma2) * 1e-10
+
+
+@dataclass(frozen=True)
+class AirCompensation:
+    """A tracker's air compensation against the air its beam really crosses.
+
+    The interferometer / ADM measures optical path n_true d; the tracker divides it by the
+    index it computes from its weather input, n_set, and reports d n_true / n_set. A tracker
+    compensating for ``set_C`` in a hall at ``hall_C`` (a station left at 20 C, a sensor in
+    the sun, a hall that warmed after the reading) has the relative distance scale error
+    n(hall) / n(set) - 1, about -0.93 ppm per kelvin the hall is warmer (Edlen): 20 C set in a
+    23 C hall reads distances 2.8 ppm short, 5.6 um at 2 m. Pressure and humidity are the
+    same in both (their own errors are smaller: 1 hPa is 0.27 ppm, 10 % humidity 0.04 ppm).
+    """
+
+    hall_C: float = 23.0
+    set_C: float = 20.0
+    pressure_Pa: float = 101325.0
+    water_vapour_Pa: float = 1170.0  # 50 % humidity at 20 C; the same absolute humidity in both
+    wavelength_m: float = 633e-9  # HeNe interferometer; an ADM near 800 nm differs by <1 %
+
+    def __post_init__(self) -> None:
+        for key in ("hall_C", "set_C", "pressure_Pa", "water_vapour_Pa", "wavelength_m"):
+            v = float(getattr(self, key))
+            if not math.isfinite(v):
+                raise ValueError(f"{key} must be finite, got {v!r}")
+            object.__setattr__(self, key, v)
+        if not -40.0 <= self.hall_C <= 60.0 or not -40.0 <= self.set_C <= 60.0:
+            raise ValueError(
+                f"air temperatures must lie in [-40, 60] C, got {self.hall_C}, {self.set_C}"
+            )
+        if not 5e4 <= self.pressure_Pa <= 1.2e5:
+            raise ValueError(f"pressure_Pa must lie in [50000, 120000], got {self.pressure_Pa}")
+        if not 0.0 <= self.water_vapour_Pa <= 2e4:
+            raise ValueError(f"water_vapour_Pa must lie in [0, 20000], got {self.water_vapour_Pa}")
+        if not 2e-7 <= self.wavelength_m <= 2e-6:
+            raise ValueError(f"wavelength_m must lie in [0.2, 2] um, got {self.wavelength_m}")
+
+    def index(self, temperature_C: float) -> float:
+        return air_refractive_index(
+            temperature_C, self.pressure_Pa, self.water_vapour_Pa, self.wavelength_m
+        )
+
+    @property
+    def scale_error(self) -> float:
+        """Relative error of every reported distance from the head (dimensionless)."""
+        if self.hall_C == self.set_C:
+            return 0.0
+        return self.index(self.hall_C) / self.index(self.set_C) - 1.0
+
+
 def _default_tracker_noise() -> TrackerNoise:
     return TrackerNoise("gaussian", 10e-6, 5e-6)
 
@@ -179,7 +255,8 @@ class Tracker:
     ``h`` the head position: ``scale_error`` is a relative scale error of the instrument
     (distances from the head are multiplied by ``1 + scale_error``); the noise follows
     :class:`TrackerNoise` evaluated at the true distance ``|x - h|``. Each reading is
-    repeated ``repeats`` times with independent noise.
+    repeated ``repeats`` times with independent noise. ``air`` (optional) adds the scale
+    error of a wrong air compensation (:class:`AirCompensation`); the two scales multiply.
     """
 
     position_m: tuple[float, float, float] = (1.2, 0.0, 0.3)
@@ -189,6 +266,7 @@ class Tracker:
     # orientation of the tracker's own frame in the base frame (R = Rz Ry Rx of these), for
     # readings reported in the tracker's frame (its origin is the head)
     rotation_rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    air: AirCompensation | None = None
 
     def __post_init__(self) -> None:
         pos = tuple(float(v) for v in np.asarray(self.position_m, dtype=float).reshape(-1))
@@ -210,6 +288,15 @@ class Tracker:
         if len(rpy) != 3 or not all(math.isfinite(v) for v in rpy):
             raise ValueError(f"rotation_rpy_rad must be 3 finite angles, got {rpy!r}")
         object.__setattr__(self, "rotation_rpy_rad", rpy)
+        if self.air is not None and not isinstance(self.air, AirCompensation):
+            raise ValueError(f"air must be an AirCompensation, got {type(self.air).__name__}")
+
+    @property
+    def total_scale_error(self) -> float:
+        """The instrument's scale error with the air compensation's, (1 + s)(1 + s_air) - 1."""
+        if self.air is None:
+            return self.scale_error
+        return (1.0 + self.scale_error) * (1.0 + self.air.scale_error) - 1.0
 
     @property
     def base_from_tracker(self) -> tuple[Array, Array]:
@@ -247,7 +334,8 @@ class Tracker:
         x = self._points(points)
         rel = x - np.asarray(self.position_m)
         dist = np.linalg.norm(rel, axis=-1)
-        exact = x + self.scale_error * rel if self.scale_error else x
+        scale = self.total_scale_error
+        exact = x + scale * rel if scale else x
         noise = self.noise.sample(dist[..., None], (*x.shape[:-1], self.repeats, 3), rng)
         return exact, noise
 
