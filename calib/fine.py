@@ -29,6 +29,7 @@ class FineProblem:
     dp: np.ndarray  # (n_eq,) measured minus nominal target positions
     columns: np.ndarray  # indices of the kept parameters in the full vector
     base_values: np.ndarray  # the coarse settings (full vector)
+    is_angle: np.ndarray | None = None  # per kept column: an angle (for paper-unit estimators)
 
 
 def fine_problem(
@@ -50,11 +51,19 @@ def fine_problem(
             "no structural error: fine calibration needs nodes spread over more than one line "
             "(the first paper uses two layers of 7 x 7 nodes)"
         )
-    return FineProblem(h_full[:, kept], dp, kept, np.array(base_values, dtype=float))
+    return FineProblem(
+        h_full[:, kept],
+        dp,
+        kept,
+        np.array(base_values, dtype=float),
+        np.asarray(model.params.is_angle)[kept],
+    )
 
 
 def estimate(problem: FineProblem, method: str, **options) -> tuple[LinearEstimate, np.ndarray]:
     """One estimator's estimate and the full parameter vector it implies."""
+    if method == "liu_paper":  # the paper's units: which columns are angles
+        options = {"is_angle": problem.is_angle, **options}
     est = make_estimator(method, **options).fit(problem.h, problem.dp)
     values = problem.base_values.copy()
     values[problem.columns] += est.x

@@ -348,9 +348,11 @@ def test_liu_covariance_never_exceeds_ols_for_a_fixed_d(d):
 
 
 def test_registry_names_the_estimators():
-    assert sorted(ESTIMATORS) == ["liu", "ols", "pcr", "ridge"]
+    assert sorted(ESTIMATORS) == ["liu", "liu_paper", "ols", "pcr", "ridge"]
     assert isinstance(make_estimator("liu", k=1.0), Liu)
-    with pytest.raises(ValueError, match=r"unknown estimator 'lasso'.*'liu', 'ols', 'pcr'"):
+    with pytest.raises(
+        ValueError, match=r"unknown estimator 'lasso'.*'liu', 'liu_paper', 'ols', 'pcr'"
+    ):
         make_estimator("lasso")
     with pytest.raises(ValueError, match=r"bad options.*'ols'"):
         make_estimator("ols", d=0.5)
@@ -398,3 +400,34 @@ def test_scale_columns_divides_by_the_column_norms():
     hs, scale = scale_columns(h)
     np.testing.assert_allclose(scale, np.sqrt(np.sum(h**2, axis=0)), rtol=1e-14)
     np.testing.assert_allclose(np.linalg.norm(hs, axis=0), 1.0, rtol=1e-14)
+
+
+def test_liu_in_the_papers_units_is_eq_11_literally():
+    """(H^T H + I)^-1 (H^T y + d b_OLS) with H in mm and deg (or rad), d from Eq. 14, written
+    out with explicit inverses; its answer depends on the unit of the angle columns."""
+    from calib.estimators.liu import liu_d_optimal
+    from calib.estimators.liu_paper_units import LiuPaperUnits
+
+    rng = np.random.default_rng(3)
+    is_angle = np.array([False, True, False, True])
+    h = rng.normal(size=(40, 4)) * np.where(is_angle, 0.3, 1.0)  # SI: m per m, m per rad
+    x_true = np.array([1e-4, 2e-4, -3e-4, 1e-4])
+    y = h @ x_true + rng.normal(0, 5e-6, 40)
+    out = {}
+    for unit, per_rad in (("deg", np.pi / 180), ("rad", 1.0)):
+        units = np.where(is_angle, 1 / per_rad, 1e3)  # paper units per SI unit
+        hp, yp = h * 1e3 / units, y * 1e3
+        g = hp.T @ hp
+        b_ols = np.linalg.solve(g, hp.T @ yp)
+        lam, phi = np.linalg.eigh(g)
+        alpha = phi.T @ b_ols
+        s2 = np.sum((yp - hp @ b_ols) ** 2) / (40 - 4)
+        d = float(np.clip(liu_d_optimal(lam, alpha[None, :], s2, 1.0)[0], 0, 1))
+        expected = np.linalg.solve(g + np.eye(4), hp.T @ yp + d * b_ols) / units
+        est = LiuPaperUnits(angle_unit=unit, is_angle=is_angle).fit(h, y)
+        np.testing.assert_allclose(est.x, expected, rtol=1e-9, atol=1e-15)
+        assert est.bias_parameter == pytest.approx(d)
+        out[unit] = est.x
+    assert not np.allclose(out["deg"], out["rad"], rtol=1e-6, atol=0)
+    with pytest.raises(ValueError, match="which of the H columns are angles"):
+        LiuPaperUnits().fit(h, y)

@@ -1,4 +1,4 @@
-"""Estimators by name, for scenario files: "ols", "liu", "ridge", "pcr"."""
+"""Estimators by name, for scenario files: "ols", "liu", "liu_paper", "ridge", "pcr"."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from typing import Any
 
 from calib.estimators.linear import Estimator
 from calib.estimators.liu import Liu
+from calib.estimators.liu_paper_units import LiuPaperUnits
 from calib.estimators.ols import OLS
 from calib.estimators.pcr import PCR
 from calib.estimators.ridge import Ridge
@@ -14,6 +15,7 @@ from calib.estimators.ridge import Ridge
 ESTIMATORS: dict[str, Callable[..., Estimator]] = {
     "ols": OLS,
     "liu": Liu,
+    "liu_paper": LiuPaperUnits,  # needs is_angle (calib.fine passes it)
     "ridge": Ridge,
     "pcr": PCR,
 }
