@@ -428,6 +428,6 @@ def test_liu_in_the_papers_units_is_eq_11_literally():
         np.testing.assert_allclose(est.x, expected, rtol=1e-9, atol=1e-15)
         assert est.bias_parameter == pytest.approx(d)
         out[unit] = est.x
-    assert not np.allclose(out["deg"], out["rad"], rtol=1e-6, atol=0)
+    assert not np.allclose(out["deg"], out["rad"], rtol=1e-8, atol=0)
     with pytest.raises(ValueError, match="which of the H columns are angles"):
         LiuPaperUnits().fit(h, y)
