@@ -87,7 +87,15 @@ def calibrate(
         raise FitFailed(
             f"the model cannot follow the data: {exc}", hints, poor_data=bool(hints)
         ) from None
-    verdict, residual = judge(model, obs, result, accuracy, max_ratio)
+    try:
+        verdict, residual = judge(model, obs, result, accuracy, max_ratio)
+    except TwinError as exc:  # the estimate went where the machine does not close
+        raise FitFailed(
+            f"the fit wandered off: at its estimate the model does not close at the data's "
+            f"commands ({exc})",
+            _hints(model, obs),
+            poor_data=True,
+        ) from None
     cov_k = result.covariance[: int(result.estimated.sum()), : int(result.estimated.sum())]
     est_names = tuple(n for n, e in zip(result.names, result.estimated, strict=True) if e)
     return CalibrationRun(

@@ -109,10 +109,13 @@ def test_spoiled_exports_fail_with_their_cause(files, capsys, tmp_path, case, co
     got, text = _run(_identify(files[case], "--sigma-mm", "0.005", "--out", str(out)), capsys)
     assert got in (code if isinstance(code, tuple) else (code,)), text
     assert message in text
-    result = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
-    assert result["verdict"]["exit_code"] == got
     if got != EXIT_OK:
         assert "FAILED" in text
+    if out.exists():  # a fit that wandered off where the model does not close writes none
+        result = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+        assert result["verdict"]["exit_code"] == got
+    else:
+        assert got == EXIT_POOR_FIT and "wandered off" in text
 
 
 def test_good_fit_reports_the_3d_metric(files, capsys, tmp_path):
