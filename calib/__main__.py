@@ -4,7 +4,8 @@
                              [--out R.json] [--sigma-mm S] [--prior-std length=1,angle=0.1]
     python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
                              [--set test] [--out V.json]
-    python -m calib diagnose --model M.xml --errors E.toml --data D.csv --sigma-mm S
+    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--sigma-mm S]
+                             [--test T.csv] [--out D.json]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
@@ -214,6 +215,39 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _diagnosis_test_set(args: argparse.Namespace, run: CalibrationRun):
+    """The --test file as a TestSet in the base frame (through the calibration's
+    registration for tracker-frame data), or None."""
+    from calib.diagnosis import TestSet
+    from calib.identify import bind_dataset
+
+    if not args.test:
+        return None
+    ds = read_dataset(args.test, expected_model=run.model.nominal.name)
+    obs = bind_dataset(run.model.nominal, ds)
+    if obs.frame != run.obs.frame:
+        raise DatasetError(
+            f"the test data is in the '{obs.frame}' frame but the calibration data in "
+            f"'{run.obs.frame}'"
+        )
+    measured = obs.measured
+    if run.result.registration is not None:
+        measured = run.result.registration.to_base(measured)
+    return TestSet(
+        obs.commands,
+        measured,
+        None if ds.order is None else np.asarray(ds.order),
+        None if ds.time_s is None else np.asarray(ds.time_s),
+    )
+
+
+def _typed_sigma_mm(args: argparse.Namespace, run: CalibrationRun) -> float | None:
+    if args.sigma_mm is not None:
+        return args.sigma_mm
+    sigma = (run.dataset.tracker or {}).get("sigma_mm")
+    return None if sigma is None else float(sigma)
+
+
 def cmd_diagnose(args: argparse.Namespace) -> int:
     from calib.diagnosis import diagnose
 
@@ -231,39 +265,82 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     obs = run.obs
     if run.result.registration is not None:  # the diagnosis works in the base frame
         obs = replace(obs, measured=run.result.registration.to_base(obs.measured), frame="base")
+    test = _diagnosis_test_set(args, run)
+    typed = _typed_sigma_mm(args, run)
+    ds = run.dataset
+    if typed is None and ds.n_repeats < 2:
+        raise DatasetError(
+            "no noise level: give --sigma-mm, a sidecar tracker.sigma_mm, or data with repeats"
+        )
     diag = diagnose(
         run.model,
         obs,
         run.result,
-        args.sigma_mm * 1e-3,
-        order=run.dataset.order,
+        None if typed is None else typed * 1e-3,
+        order=ds.order,
+        time_s=ds.time_s,
+        repeat_std_m=ds.repeat_std if ds.n_repeats > 1 else None,
+        n_repeats=ds.n_repeats,
         tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
+        test=test,
     )
+    noise = diag.noise.as_dict() if diag.noise is not None else {}
     print(
-        f"geometric residual {diag.residual_rms_mm:.4f} mm RMS per coordinate; tracker noise "
-        f"{diag.noise_floor_rms_mm:.4f} mm per coordinate; chi-square p = {diag.chi2_p_value:.3g}"
+        f"geometric residual {diag.residual_rms_mm:.4f} mm RMS per coordinate; noise "
+        f"{diag.noise_floor_rms_mm:.4f} mm per coordinate ({noise.get('source', 'typed')}); "
+        f"chi-square p = {diag.chi2_p_value:.3g}"
     )
     print(f"diagnosis: {diag.chosen} ({diag.reason})")
     for note in diag.notes:
         print(f"  note: {note}")
+    for name, entry in diag.effect_parameters.items():
+        for pname, v in entry.items():
+            std = "" if v["std"] is None else f" +- {v['std']:.3g}"
+            value = v["value"] if isinstance(v["value"], str) else f"{v['value']:.4g}"
+            print(f"  {name}: {pname} = {value}{std} {v['unit']}")
     for name, score in diag.scores.items():
-        print(f"  {name:24s} held-out RMS {score.heldout_rms_mm:.5f} mm, BIC {score.bic:.1f}")
-    if args.out:
-        write_json_atomic(
-            Path(args.out),
-            {
-                "residual": run.residual,
-                "residual_rms_mm_per_coordinate": diag.residual_rms_mm,
-                "noise_floor_rms_mm_per_coordinate": diag.noise_floor_rms_mm,
-                "chi2_p_value": diag.chi2_p_value,
-                "diagnosed_effect": diag.chosen,
-                "reason": diag.reason,
-                "notes": list(diag.notes),
-                "rejected": rejected_rows(run),
-                "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
-                "effect_parameters": {n: v.tolist() for n, v in diag.coefficients.items()},
-            },
+        tail = "" if score.test_rms_mm is None else f", test RMS {score.test_rms_mm:.5f} mm (3D)"
+        refused = f"  REFUSED: {score.refused}" if score.refused else ""
+        print(
+            f"  {name:24s} held-out RMS blocked {score.heldout_blocked_mm:.5f} / random "
+            f"{score.heldout_random_mm:.5f} mm{tail}{refused}"
         )
+    if diag.test is not None:
+        for side in ("before", "after"):
+            t = diag.test[side]
+            print(
+                f"test {side:6s}: 3D position error per reading RMS {t['rms_mm']:.4f} mm, "
+                f"mean {t['mean_mm']:.4f} mm, max {t['max_mm']:.4f} mm"
+            )
+    if args.out:
+        out = Path(args.out)
+        content = {
+            "residual": run.residual,
+            "residual_rms_mm_per_coordinate": diag.residual_rms_mm,
+            "noise_floor_rms_mm_per_coordinate": diag.noise_floor_rms_mm,
+            "noise": noise,
+            "chi2_p_value": diag.chi2_p_value,
+            "diagnosed_effect": diag.chosen,
+            "reason": diag.reason,
+            "notes": list(diag.notes),
+            "rejected": rejected_rows(run),
+            "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
+            "heldout_rms_mm_per_coordinate": diag.heldout,
+            "refused": {n: s.refused for n, s in diag.scores.items() if s.refused},
+            "effect_parameters": diag.effect_parameters,
+            "residual_structure": diag.structure_detail,
+            "metric": "3D position error per reading |p_measured - p_model| (mm)",
+        }
+        if diag.test is not None:
+            content["test"] = {
+                side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
+                for side in ("before", "after")
+            }
+        if diag.plot is not None:
+            from calib.diagnosis_figure import save_diagnosis_png
+
+            content["figure"] = str(save_diagnosis_png(diag, out.with_suffix(".png")))
+        write_json_atomic(out, content)
     return EXIT_OK
 
 
@@ -339,8 +416,13 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument(
         "--sigma-mm",
         type=positive_float,
-        required=True,
-        help="tracker noise per coordinate (mm), e.g. from repeat readings",
+        help="tracker noise per coordinate (mm); default: from the repeat readings, else the "
+        "sidecar's tracker.sigma_mm; a typed value is checked against the repeats",
+    )
+    diag.add_argument(
+        "--test",
+        help="a Dataset CSV of poses not used to fit: an effect is named only if it lowers "
+        "their error too; the JSON gets test.before and test.after",
     )
     return parser
 

@@ -1,0 +1,341 @@
+"""Fitting candidates beside the geometry, and judging them on poses that did not fit them.
+
+The residual r (N poses, R rows) of the geometric calibration is fitted, on a set of training
+poses, by a geometric correction (the identified parameters' columns G) plus the candidates'
+columns X: r ~ G beta + X theta, linearised at the geometric estimate. Sign constraints
+(a play, a compliance cannot be negative) are bounds of the fit.
+
+Nested cross-validation: in every outer training set a candidate's shape (pitch, time
+constant, harmonic, payload) is scanned on a grid by least squares, the best local minima are
+refined, and the finalists are compared by an inner cross-validation of that training set
+only; the outer held-out poses never take part in the choice. Outer folds are contiguous
+blocks of the measurement order (a drift must predict *later* poses) and random.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+
+from calib.diagnosis_candidates import NO_SHAPE, Candidate
+from calib.diagnosis_context import Context
+
+SCHEMES = ("blocked", "random")
+N_FINALISTS = 3
+INNER_FOLDS = 4
+RCOND = 1e-10
+
+
+def fold_labels(time: np.ndarray, folds: int, scheme: str, seed: int = 0) -> np.ndarray:
+    """Fold of each pose: contiguous blocks of the measurement order, or a seeded shuffle."""
+    n = len(time)
+    rank = np.empty(n, dtype=int)
+    rank[np.argsort(time, kind="stable")] = np.arange(n)
+    if scheme == "blocked":
+        return rank * folds // n
+    perm = np.random.default_rng(seed).permutation(n)
+    out = np.empty(n, dtype=int)
+    out[perm] = np.arange(n) % folds
+    return out
+
+
+def _orth(a: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the column space of ``a`` (rank-revealing SVD)."""
+    if a.shape[1] == 0:
+        return np.zeros((a.shape[0], 0))
+    u, s, _ = np.linalg.svd(a, full_matrices=False)
+    keep = s > RCOND * max(s[0], 1e-300)
+    return u[:, keep]
+
+
+@dataclass
+class Problem:
+    """The geometric residual and columns, with cached projection bases per training set."""
+
+    r: np.ndarray  # (N, R), rejected rows zero
+    geo: np.ndarray  # (N, R, p)
+    _cache: dict = field(default_factory=dict)
+
+    def rows(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        g = self.geo[poses].reshape(-1, self.geo.shape[2])
+        return g, self.r[poses].reshape(-1)
+
+    def basis(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Q, G^+) of the geometric columns of these poses."""
+        key = np.asarray(poses, bool).tobytes()
+        if key not in self._cache:
+            g, _ = self.rows(poses)
+            scale = np.linalg.norm(g, axis=0)
+            scale[scale == 0] = 1.0
+            self._cache[key] = (
+                _orth(g / scale),
+                np.linalg.pinv(g / scale, rcond=RCOND) / scale[:, None],
+            )
+        return self._cache[key]
+
+
+@dataclass(frozen=True)
+class Fit:
+    theta: np.ndarray  # (K,) effect parameters, SI
+    beta: np.ndarray  # (p,) geometric correction, SI
+
+
+def _flat(xs: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
+    if not xs:
+        return np.zeros((int(np.sum(poses)) * 1, 0))
+    return np.concatenate([x[poses] for x in xs], axis=2).reshape(-1, sum(x.shape[2] for x in xs))
+
+
+def fit(
+    prob: Problem, xs: list[np.ndarray], poses: np.ndarray, lower: np.ndarray | None = None
+) -> Fit:
+    """Least squares of r by G beta + X theta on ``poses``; ``lower`` bounds theta below."""
+    q, gplus = prob.basis(poses)
+    _, rt = prob.rows(poses)
+    k = sum(x.shape[2] for x in xs)
+    if k == 0:
+        return Fit(np.zeros(0), gplus @ rt)
+    xt = _flat(xs, poses).reshape(len(rt), k)
+    xp = xt - q @ (q.T @ xt)
+    rp = rt - q @ (q.T @ rt)
+    scale = np.linalg.norm(xp, axis=0)
+    scale[scale < 1e-300] = 1.0
+    if lower is not None and np.any(np.isfinite(lower)):
+        res = optimize.lsq_linear(xp / scale, rp, bounds=(lower * scale, np.inf), method="bvls")
+        theta = res.x / scale
+    else:
+        theta = np.linalg.lstsq(xp / scale, rp, rcond=RCOND)[0] / scale
+    return Fit(theta, gplus @ (rt - xt @ theta))
+
+
+def heldout_sse(prob: Problem, xs: list[np.ndarray], f: Fit, poses: np.ndarray) -> np.ndarray:
+    """Per-pose sum of squared residuals on ``poses`` after the fit ``f``."""
+    e = prob.r[poses] - prob.geo[poses] @ f.beta
+    if xs:
+        e = e - np.concatenate([x[poses] for x in xs], axis=2) @ f.theta
+    return np.sum(e**2, axis=1)
+
+
+def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> np.ndarray:
+    """Columns of the candidate at every shape of ``grid`` (S, N, R, k), cached per grid."""
+    key = (cand.name, id(ctx), np.asarray(grid, float).tobytes())
+    if key not in prob._cache:
+        prob._cache[key] = np.stack([cand.design(ctx, float(v)) for v in grid])
+    return prob._cache[key]
+
+
+def rss_over_grid(
+    prob: Problem,
+    fixed: list[np.ndarray],
+    cand: Candidate,
+    ctx: Context,
+    grid,
+    poses,
+    cache: bool = False,
+) -> np.ndarray:
+    """Training RSS of geometry + ``fixed`` + candidate at each shape (unconstrained)."""
+    _, rt = prob.rows(poses)
+    q0, _ = prob.basis(poses)
+    if fixed:
+        xf = _flat(fixed, poses).reshape(len(rt), -1)
+        q = _orth(np.hstack([q0, xf - q0 @ (q0.T @ xf)]))
+    else:
+        q = q0
+    rp = rt - q @ (q.T @ rt)
+    base = float(rp @ rp)
+    if cache:
+        x_all = grid_designs(prob, cand, ctx, grid)[:, poses]
+    else:
+        x_all = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
+    x_all = x_all.reshape(len(grid), len(rt), -1)  # (S, m, k)
+    out = np.empty(len(grid))
+    for lo in range(0, len(grid), 64):
+        x = x_all[lo : lo + 64]
+        qx = np.matmul(q.T, x)  # (S, r, k)
+        ata = np.matmul(x.transpose(0, 2, 1), x) - np.matmul(qx.transpose(0, 2, 1), qx)
+        atb = np.matmul(x.transpose(0, 2, 1), rp)  # rp is orthogonal to q already
+        d = np.sqrt(np.clip(np.einsum("skk->sk", ata), 0, None))
+        d[d < 1e-300] = 1.0
+        a_n = ata / d[:, :, None] / d[:, None, :]
+        b_n = atb / d
+        k = a_n.shape[1]
+        a_n = a_n + RCOND * np.eye(k)[None] * 1e2
+        try:
+            sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
+        out[lo : lo + 64] = base - np.einsum("sk,sk->s", b_n, sol)
+    return out
+
+
+def _refine(prob, fixed, cand, ctx, grid, i, poses) -> float:
+    """Refine the shape between the grid neighbours of index ``i``."""
+    s = float(grid[i])
+    if cand.shape_name == "harmonic" or not np.isfinite(s) or len(grid) < 3:
+        return s
+    lo, hi = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, len(grid) - 1)])
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return s
+    lo, hi = min(lo, hi), max(lo, hi)
+    if cand.shape_log and lo <= 0:
+        return s
+
+    def cost(u: float) -> float:
+        v = float(np.exp(u)) if cand.shape_log else u
+        return float(rss_over_grid(prob, fixed, cand, ctx, [v], poses)[0])
+
+    a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
+    res = optimize.minimize_scalar(
+        cost, bounds=(a, b), method="bounded", options={"xatol": 2e-3 * abs(b - a) + 1e-15}
+    )
+    return float(np.exp(res.x)) if cand.shape_log else float(res.x)
+
+
+def choose_shape(
+    prob: Problem, fixed: list[np.ndarray], cand: Candidate, ctx: Context, poses: np.ndarray
+) -> float:
+    """The candidate's shape from these poses only: grid scan, refined finalists, inner CV."""
+    if not cand.shaped:
+        return NO_SHAPE
+    grid = np.asarray(cand.grid(ctx), dtype=float)
+    rss = rss_over_grid(prob, fixed, cand, ctx, grid, poses, cache=True)
+    inner = np.ones(len(rss), bool)
+    inner[1:-1] = (rss[1:-1] <= rss[:-2]) & (rss[1:-1] <= rss[2:])
+    minima = [i for i in np.argsort(rss) if inner[i]][:N_FINALISTS]
+    finalists = [_refine(prob, fixed, cand, ctx, grid, i, poses) for i in minima]
+    if len(finalists) == 1:
+        return finalists[0]
+    idx = np.flatnonzero(poses)
+    labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
+    scores = []
+    for s in finalists:
+        x = cand.design(ctx, s)
+        sse = 0.0
+        for f in range(INNER_FOLDS):
+            train = np.zeros_like(poses)
+            train[idx[labels != f]] = True
+            test = np.zeros_like(poses)
+            test[idx[labels == f]] = True
+            ft = fit(prob, [*fixed, x], train)
+            sse += float(np.sum(heldout_sse(prob, [*fixed, x], ft, test)))
+        scores.append(sse)
+    return finalists[int(np.argmin(scores))]
+
+
+def lower_bounds(cands: list[Candidate], xs: list[np.ndarray]) -> np.ndarray | None:
+    lows = []
+    for c, x in zip(cands, xs, strict=True):
+        nn = c.nonnegative or (False,) * x.shape[2]
+        lows.append(np.where(np.asarray(nn, bool), 0.0, -np.inf))
+    low = np.concatenate(lows) if lows else np.zeros(0)
+    return low if np.any(np.isfinite(low)) else None
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One model (a set of candidates) judged on held-out poses."""
+
+    names: tuple[str, ...]
+    heldout: dict[str, np.ndarray]  # scheme -> per-pose held-out SSE (N,)
+    fold_shapes: dict[str, list[tuple[float, ...]]]  # scheme -> per fold, per candidate
+    shapes: tuple[float, ...]  # from all poses, per candidate
+    fit: Fit  # on all poses
+    sizes: tuple[int, ...]  # parameters per candidate
+    n_rows: int
+
+    def heldout_rms_mm(self, scheme: str | None = None) -> float:
+        if scheme is None:
+            return (
+                float(np.sqrt(np.mean([np.sum(v) for v in self.heldout.values()]) / self.n_rows))
+                * 1e3
+            )
+        return float(np.sqrt(np.sum(self.heldout[scheme]) / self.n_rows)) * 1e3
+
+
+def evaluate(
+    prob: Problem,
+    ctx: Context,
+    folds: dict[str, np.ndarray],
+    cands: list[Candidate],
+    previous: Evaluation | None,
+    n_rows: int,
+) -> Evaluation:
+    """Nested CV of geometry + ``cands``; the shapes of the candidates already in
+    ``previous`` are kept per fold, only the last candidate's shape is chosen here."""
+    n = ctx.n_poses
+    new = cands[-1] if cands else None
+    heldout, fold_shapes = {}, {}
+    for scheme, labels in folds.items():
+        sse = np.zeros(n)
+        shapes_s = []
+        for f in range(int(labels.max()) + 1):
+            train, test = labels != f, labels == f
+            old = previous.fold_shapes[scheme][f] if previous is not None else ()
+            fixed = [c.design(ctx, s) for c, s in zip(cands[:-1], old, strict=True)]
+            shp = (*old, choose_shape(prob, fixed, new, ctx, train)) if new else ()
+            xs = [c.design(ctx, s) for c, s in zip(cands, shp, strict=True)]
+            ft = fit(prob, xs, train, lower_bounds(cands, xs))
+            sse[test] = heldout_sse(prob, xs, ft, test)
+            shapes_s.append(shp)
+        heldout[scheme], fold_shapes[scheme] = sse, shapes_s
+    everything = np.ones(n, bool)
+    old = previous.shapes if previous is not None else ()
+    fixed = [c.design(ctx, s) for c, s in zip(cands[:-1], old, strict=True)]
+    shapes = (*old, choose_shape(prob, fixed, new, ctx, everything)) if new else ()
+    xs = [c.design(ctx, s) for c, s in zip(cands, shapes, strict=True)]
+    full = fit(prob, xs, everything, lower_bounds(cands, xs))
+    return Evaluation(
+        names=tuple(c.name for c in cands),
+        heldout=heldout,
+        fold_shapes=fold_shapes,
+        shapes=shapes,
+        fit=full,
+        sizes=tuple(x.shape[2] for x in xs),
+        n_rows=n_rows,
+    )
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    theta: np.ndarray  # unconstrained estimate, SI
+    std: np.ndarray  # its standard errors, SI
+    shape_std: tuple[float, ...]  # per candidate (NaN when no shape or not defined)
+    sigma2: float  # residual variance per row
+
+
+def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluation) -> Uncertainty:
+    """Unconstrained estimate and standard errors at the chosen shapes (all poses); the
+    shape's standard error from the curvature of the profile RSS."""
+    n = ctx.n_poses
+    everything = np.ones(n, bool)
+    xs = [c.design(ctx, s) for c, s in zip(cands, ev.shapes, strict=True)]
+    q, _ = prob.basis(everything)
+    _, rt = prob.rows(everything)
+    xt = _flat(xs, everything).reshape(len(rt), -1)
+    xp = xt - q @ (q.T @ xt)
+    rp = rt - q @ (q.T @ rt)
+    theta = np.linalg.lstsq(xp, rp, rcond=RCOND)[0]
+    resid = rp - xp @ theta
+    dof = max(ev.n_rows - q.shape[1] - xt.shape[1] - sum(c.shaped for c in cands), 1)
+    sigma2 = float(resid @ resid) / dof
+    cov = sigma2 * np.linalg.pinv(xp.T @ xp, rcond=RCOND)
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    shape_std = []
+    for i, (c, s) in enumerate(zip(cands, ev.shapes, strict=True)):
+        if not c.shaped or not np.isfinite(s) or c.shape_name == "harmonic":
+            shape_std.append(float("nan"))
+            continue
+        others = [x for j, x in enumerate(xs) if j != i]
+        u = np.log(s) if c.shape_log else s
+        h = 1e-3 * (1.0 if c.shape_log else abs(s) or 1.0)
+
+        def rss(v: float, c=c, others=others) -> float:
+            val = float(np.exp(v)) if c.shape_log else v
+            return float(rss_over_grid(prob, others, c, ctx, [val], everything)[0])
+
+        curv = (rss(u + h) - 2 * rss(u) + rss(u - h)) / h**2
+        sd = float(np.sqrt(2 * sigma2 / curv)) if curv > 0 else float("nan")
+        shape_std.append(s * sd if c.shape_log else sd)
+    return Uncertainty(theta, std, tuple(shape_std), sigma2)
