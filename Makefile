@@ -7,8 +7,13 @@ NAME   ?= liu_vs_ols
 FILE   ?=
 VIEW   ?=
 VIEWFLAG := $(if $(filter 1 yes true,$(VIEW)),--view,)
+SEEDS  ?= 8
+OVER   ?= both
+ENGINE ?= ray
+SET    ?=
+SETFLAGS := $(foreach s,$(SET),--set $(s))
 
-.PHONY: setup test test-fast scenario bench lint format view clean
+.PHONY: setup test test-fast scenario sweep bench lint format view clean
 
 setup: $(STAMP)
 
@@ -30,6 +35,12 @@ ifneq ($(strip $(FILE)),)
 else
 	$(PY) -m scenarios run $(NAME) $(VIEWFLAG)
 endif
+
+# make sweep NAME=undeclared_effect SEEDS=16 [OVER=noise] [SET="tracker.sigma_mm=0.002,0.005"]
+# [ENGINE=local]; on a cluster: RAY_ADDRESS=<head>:6379 make sweep ...
+sweep: $(STAMP)
+	$(PY) -m scenarios sweep $(if $(strip $(FILE)),$(FILE),$(NAME)) --seeds $(SEEDS) \
+		--over $(OVER) --engine $(ENGINE) $(SETFLAGS)
 
 bench: $(STAMP)
 	$(PY) -m bench

@@ -1,4 +1,6 @@
-"""Command line: ``python -m scenarios run NAME|PATH [--results DIR]`` and ``list``."""
+"""Command line: ``python -m scenarios run NAME|PATH [--results DIR]``, ``list``, and
+``sweep NAME|PATH --seeds N [--over truth|noise|both] [--set key=v1,v2 ...] [--engine ray|local]``
+(Ray: a local instance, or the cluster RAY_ADDRESS names)."""
 
 from __future__ import annotations
 
@@ -29,11 +31,36 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--view", action="store_true", help="open the rerun viewer as well")
     run.add_argument("--no-record", action="store_true", help="do not write the .rrd file")
     sub.add_parser("list", help="list the scenarios shipped in scenarios/")
+    sw = sub.add_parser(
+        "sweep",
+        help="run a scenario's study once per seed (and per swept setting) as Ray tasks",
+    )
+    sw.add_argument("scenario")
+    sw.add_argument("--seeds", type=int, required=True, help="runs per setting")
+    sw.add_argument("--over", choices=("truth", "noise", "both"), default="both")
+    sw.add_argument(
+        "--set",
+        dest="sets",
+        action="append",
+        default=[],
+        metavar="KEY=V1[,V2 ...]",
+        help="override a scenario key; several values sweep it (repeatable)",
+    )
+    sw.add_argument(
+        "--engine",
+        choices=("ray", "local"),
+        default="ray",
+        help="ray (default: local instance, or the cluster RAY_ADDRESS names) or in-process",
+    )
+    sw.add_argument("--results", type=Path, default=None, help="results root (default results/)")
+    sw.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     if args.command == "list":
         for f in sorted(SCENARIO_DIR.glob("*.toml")):
             print(f.stem)
         return 0
+    if args.command == "sweep":
+        return _sweep(args)
     try:
         from scenarios.runner import run_scenario
 
@@ -59,6 +86,36 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     print(f"{out_dir / 'summary.json'} (runtime {summary.get('runtime_s', float('nan')):.1f} s)")
     return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from scenarios.sweep import sweep
+    from scenarios.sweep_engine import EngineError
+
+    try:
+        summary, out_dir = sweep(
+            args.scenario,
+            args.seeds,
+            over=args.over,
+            sets=args.sets,
+            engine=args.engine,
+            results_root=args.results,
+            quiet=args.quiet,
+        )
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except EngineError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted: finished runs kept; run again to resume", file=sys.stderr)
+        return 130
+    print(
+        f"{_shown(out_dir / 'summary.json')} ({summary['n_runs']} runs, "
+        f"{summary['n_failed']} failed, engine {summary['engine']})"
+    )
+    return 1 if summary["n_failed"] else 0
 
 
 if __name__ == "__main__":

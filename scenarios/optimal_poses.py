@@ -10,7 +10,9 @@
 3. With the Table 2 truth and the paper's pose noise, each set is identified by LM over many
    noise draws: the largest parameter error and the verification error on the 216-pose grid
    after compensation (first order: the identified model's residual pose error twist at each
-   verification pose, B (truth - estimate)), averaged over the draws.
+   verification pose, B (truth - estimate)), averaged over the draws. The draws run as sweep
+   tasks (scenarios.sweep_draws), one per pose set, since each draw starts from the previous
+   draw's estimate: in this process, or on Ray inside a sweep or with RAY_ADDRESS set.
 """
 
 from __future__ import annotations
@@ -31,8 +33,11 @@ from scenarios.figures import index_vs_count_png
 from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
+from scenarios.sweep_draws import map_draws
 from twin.kinematics import forward
 from twin.kinematics_batch import forward_batch
+from twin.mechanism import Mechanism
+from twin.parameter_file import load_parameter_set
 from twin.sensitivity import tool_twist_jacobian
 from twin.tracker import PoseNoise
 from twin.workspace import boundary_poses, grid_poses, random_poses
@@ -50,6 +55,39 @@ def _blocks(model: CalibrationModel, commands: np.ndarray) -> list[np.ndarray]:
     jac = model.jacobian(zero, model.predict(zero, commands))
     rows = 3 * model.nominal.n_targets
     return [jac[k * rows : (k + 1) * rows] for k in range(len(commands))]
+
+
+def identify_noise_draws(
+    model_path: str,
+    error_model_path: str,
+    commands: np.ndarray,
+    measured: np.ndarray,
+    truth_values: np.ndarray,
+    b_ver: np.ndarray,
+) -> dict[str, Any]:
+    """One pose set identified by LM over its noise draws (``measured``: (D, N, T, 3)), each
+    draw starting from the previous draw's estimate; a sweep task (plain data in and out).
+
+    Returns the largest parameter error (mm, deg) and the verification peaks (mm, deg) of each
+    draw that converged, and how many did not."""
+    nominal = Mechanism.from_xml(model_path)
+    params = load_parameter_set(error_model_path, nominal.model)
+    out: dict[str, Any] = {"param": [], "pos": [], "ori": [], "failed": 0}
+    start = np.zeros(len(params))
+    for readings in measured:
+        model = CalibrationModel(nominal, params)  # each draw's closure solves start cold
+        try:
+            res = identify(model, Observations(commands, readings), x0=start)
+        except CalibError:
+            out["failed"] += 1
+            continue
+        start = res.values  # the next draw starts from this estimate
+        err = truth_values - res.values
+        twist = b_ver @ err  # (V, 6)
+        out["param"].append(float(np.max(np.abs(params.to_display(err)))))
+        out["pos"].append(float(np.max(np.linalg.norm(twist[:, :3], axis=1))) * 1e3)
+        out["ori"].append(float(np.degrees(np.max(np.linalg.norm(twist[:, 3:], axis=1)))))
+    return out
 
 
 def run(
@@ -111,7 +149,6 @@ def run(
 
     progress.step("verification grid and its pose-error Jacobians")
     _, v_cmds = grid_poses(nominal, 3, 8, rng, margin=0.25, stroke_margin=2e-3)
-    zero = np.zeros(len(params))
     b_ver = np.array(
         [tool_twist_jacobian(truth, params, truth_values, forward(truth, c).qpos) for c in v_cmds]
     )  # (V, 6, n): truth side of the scoring only
@@ -119,30 +156,25 @@ def run(
     draws = scenario.get("evaluation.noise_draws", int)
     local = nominal.target_local()
     clean = {name: forward_batch(truth, c) for name, c in sets.items()}
-    results: dict[str, dict[str, list[float]]] = {
-        n: {"param": [], "pos": [], "ori": []} for n in sets
-    }
-    failures = {n: 0 for n in sets}
-    starts = {n: zero for n in sets}
-    for k in range(draws):
-        for name, cmds in sets.items():
+    measured: dict[str, list[np.ndarray]] = {n: [] for n in sets}
+    for _ in range(draws):  # the noise of every draw, drawn in the order the loop drew it
+        for name in sets:
             sol = clean[name]
             r_n, p_n = noise.perturb(sol.tool_rotation, sol.tool_position, rng)
-            measured = np.einsum("nij,tj->nti", r_n, local) + p_n[:, None, :]
-            try:
-                res = identify(model, Observations(cmds, measured), x0=starts[name])
-            except CalibError:
-                failures[name] += 1
-                continue
-            starts[name] = res.values  # the next draw starts from this estimate
-            err = truth_values - res.values
-            twist = b_ver @ err  # (V, 6)
-            results[name]["param"].append(float(np.max(np.abs(params.to_display(err)))))
-            results[name]["pos"].append(float(np.max(np.linalg.norm(twist[:, :3], axis=1))) * 1e3)
-            results[name]["ori"].append(
-                float(np.degrees(np.max(np.linalg.norm(twist[:, 3:], axis=1))))
-            )
-        progress.counter("noise draws", k + 1, draws, every=max(draws // 10, 1))
+            measured[name].append(np.einsum("nij,tj->nti", r_n, local) + p_n[:, None, :])
+    progress.step(f"identification over {draws} noise draws, one task per pose set")
+    files = (
+        str(scenario.resolve(scenario.get("model", str), "model")),
+        str(scenario.resolve(scenario.get("error_model", str), "error_model")),
+    )
+    chains = map_draws(
+        identify_noise_draws,
+        [(*files, sets[n], np.stack(measured[n]), truth_values, b_ver) for n in sets],
+        progress,
+        "pose sets identified over the noise draws",
+    )
+    results = dict(zip(sets, chains, strict=True))
+    failures = {n: r["failed"] for n, r in results.items()}
 
     def mean(v: list[float]) -> float | None:
         return float(np.mean(v)) if v else None

@@ -63,18 +63,25 @@ def _umask() -> int:
     return mask
 
 
+KEPT = ("sweep",)  # subfolders of results/<name> that a plain run carries over
+
+
 @contextlib.contextmanager
 def replaced_whole(out_dir: Path) -> Iterator[Path]:
     """Yield an empty temporary sibling of ``out_dir`` to write into; when the block ends
     without an exception, it becomes ``out_dir`` (the previous folder renamed away, the new
-    one renamed into place, the old one deleted). On any exception, KeyboardInterrupt
-    included, the temporary folder is removed and ``out_dir`` is left untouched."""
+    one renamed into place, the old one deleted; a ``sweep/`` folder of earlier sweeps is
+    carried over). On any exception, KeyboardInterrupt included, the temporary folder is
+    removed and ``out_dir`` is left untouched."""
     root = out_dir.parent
     root.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=root))
     try:
         os.chmod(tmp, DIR_MODE & ~_umask())  # mkdtemp makes 0700; results are ordinary
         yield tmp
+        for keep in KEPT:  # a sweep's runs are not this run's output: they stay
+            if (out_dir / keep).is_dir() and not (tmp / keep).exists():
+                os.rename(out_dir / keep, tmp / keep)
         old = None
         if out_dir.exists() or out_dir.is_symlink():
             old = root / f".{out_dir.name}.old-{secrets.token_hex(4)}"
