@@ -146,6 +146,19 @@ def run(
         recorder.log_metric("scaled_singular_values", "rank_index", k, float(np.sqrt(lam)))
     recorder.log_text("identifiable", "\n".join(f"* {n}" for n in kept_names), "identifiable set")
 
+    from scenarios.identifiability_figures import null_space_png, spectrum_png
+
+    _, rank_fig = spectrum_png(
+        out_dir / "singular_values.png",
+        h_twin,
+        f"polisher, {len(poses)} poses: column-scaled H of the {len(params)} source errors",
+    )
+    _, in_null = null_space_png(
+        out_dir / "null_space.png",
+        h_twin,
+        list(params.names),
+        "which source errors the plan cannot see (share in the null space of H)",
+    )
     # a wrist angle or node outside the plan raises before this point (WorkspaceError)
     summary = {
         "scenario": scenario.name,
@@ -170,6 +183,9 @@ def run(
         "screw_vs_twin_max_rel_err": screw_err,
         "home_check_residual_m": forward(nominal, commands[0]).residual,
         "plans": plans,
+        "figures": {"singular_values": "singular_values.png", "null_space": "null_space.png"},
+        "rank_of_figure": rank_fig,
+        "mostly_in_null_space": in_null,
         "runtime_s": time.perf_counter() - t0,
     }
     recorder.log_report(scenario.study, summary)

@@ -27,6 +27,15 @@ def report(s: dict[str, Any]) -> str:
         f"| limbs 2 and 3 alike | {s['limbs_2_and_3_alike']} | yes |",
         f"| condition number (scaled, Steps 1-3 set) | {s['condition_number']:.4g} | |",
         "",
+        "## The spectrum and the null space",
+        "",
+        f"![singular values of the column-scaled H]({s['figures']['singular_values']})",
+        "",
+        f"Rank {s['rank_of_figure']} of {s['n_source_errors']}. Source errors mostly (share "
+        f"> 0.5) in the null space: {len(s['mostly_in_null_space'])}.",
+        "",
+        f"![share of each source error in the null space]({s['figures']['null_space']})",
+        "",
         "## Cross-checks",
         "",
         f"* screw-theory H against the twin's implicit-function H: max relative difference "
