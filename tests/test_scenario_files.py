@@ -66,13 +66,14 @@ BAD = [
      ["'verification.nodes_per_axis' must be >= 1"]),
     ("margin out of range", HEX, "margin = 0.25", "margin = 0.75",
      ["'verification.margin' must be < 0.5"]),
-    ("effect argument typo", UND, "play_m = 20e-6", "play_mm = 20e-6",
-     ["'truth.effects[0].play_mm'", "effect 'backlash' has no argument 'play_mm'",
-      "did you mean 'play_m'"]),
-    ("effect argument of the wrong type", UND, "rate_K_per_pose = 0.25",
-     'rate_K_per_pose = "fast"', ["'truth.effects[1].rate_K_per_pose'", "float"]),
-    ("unknown effect name", UND, 'kind = "backlash"', 'kind = "backlsh"',
-     ["'truth.effects[0].kind'", "unknown effect 'backlsh'", "did you mean 'backlash'"]),
+    ("effect argument typo", UND, "pitch_m = 4e-3", "pitch_mm = 4e-3",
+     ["'truth.effects[0].pitch_mm'", "effect 'lead_error_harmonic' has no argument 'pitch_mm'",
+      "did you mean 'pitch_m'"]),
+    ("effect argument of the wrong type", UND, "delta_K = 8.0",
+     'delta_K = "hot"', ["'truth.effects[1].delta_K'", "float"]),
+    ("unknown effect name", UND, 'kind = "thermal_warmup"', 'kind = "thermal_warmpu"',
+     ["'truth.effects[1].kind'", "unknown effect 'thermal_warmpu'",
+      "did you mean 'thermal_warmup'"]),
     ("name ..", HEX, 'name = "hexapod_paper"', 'name = ".."', ["'name'", "'..'"]),
     ("name with /", HEX, 'name = "hexapod_paper"', 'name = "../elsewhere/x"',
      ["'name'", "path separators"]),
@@ -222,10 +223,10 @@ def test_study_modules_write_only_into_their_out_dir():
 
 
 def test_cli_prints_error_and_exits_2_without_traceback(tmp_path, capsys):
-    path = _copy(tmp_path, UND, "play_m = 20e-6", "play_mm = 20e-6")
+    path = _copy(tmp_path, UND, "pitch_m = 4e-3", "pitch_mm = 4e-3")
     assert cli(["run", str(path), "--results", str(tmp_path / "results"), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and "play_mm" in err and "Traceback" not in err
+    assert err.startswith("error: ") and "pitch_mm" in err and "Traceback" not in err
     assert not (tmp_path / "results").exists()  # nothing ran, nothing was written
 
 
