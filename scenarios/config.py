@@ -442,7 +442,7 @@ SCHEMAS: dict[str, Table] = {
     ),
     "liu_vs_ols": _base(
         seed=_SEED,
-        truth=_truth(),
+        truth=_truth(effects=Key(list, check=_check_effects)),
         tracker=Table(
             {
                 "sigma_mm": Key(float, required=True, min=0),
@@ -569,6 +569,48 @@ SCHEMAS: dict[str, Table] = {
             required=True,
         ),
         plan=Table({"calibration_poses": _COUNT, "test_poses": _COUNT}, required=True),
+    ),
+    "diagnosis_benchmark": _base(
+        machine=Key(str),
+        truth=Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
+        tracker=Table(
+            {"sigma_mm": Key(float, required=True, above=0), "position_mm": _POSITION_MM},
+            required=True,
+        ),
+        plan=Table(
+            {"calibration_poses": _COUNT, "test_poses": _COUNT, "audit_poses": _COUNT},
+            required=True,
+        ),
+        benchmark=Table(
+            {
+                # twin effect kinds (scenarios.machine_setup.EFFECTS), each at its defaults
+                "kinds": Key(
+                    list,
+                    required=True,
+                    item=str,
+                    check=lambda v, w: _check_effects([{"kind": k} for k in v], w),
+                ),
+                "multipliers": Key(list, required=True, item=float, min_items=1, above=0),
+                "seeds": Key(list, required=True, item=int, min_items=1, min=0),
+                "none_seeds": Key(list, required=True, item=int, min=0),
+            },
+            required=True,
+        ),
+        extra_machines=Key(
+            list,
+            item=Table(
+                {
+                    "label": Key(str, required=True),
+                    "model": Key(str, required=True),
+                    "error_model": Key(str, required=True),
+                    "kinds": Key(
+                        list,
+                        item=str,
+                        check=lambda v, w: _check_effects([{"kind": k} for k in v], w),
+                    ),
+                }
+            ),
+        ),
     ),
 }
 

@@ -25,10 +25,11 @@ from calib.fine import estimate, fine_problem
 from calib.scoring import max_mean_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png
-from scenarios.machine_setup import load_machine
+from scenarios.machine_setup import build_effects, load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics_batch import forward_batch
+from twin.measurement import measure as twin_measure
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import commands_for_poses, layer_poses
 
@@ -76,9 +77,26 @@ def run(
         repeats=scenario.get("tracker.repeats", int, 1),
     )
 
+    effects = build_effects(scenario)
+    clock = [0]  # poses measured so far: the measurement sequence the effects follow
+
+    def run_machine(commands: np.ndarray):
+        """The truth twin with its effects, at the next poses of the sequence."""
+        order = clock[0] + np.arange(len(commands))
+        clock[0] += len(commands)
+        return twin_measure(truth, commands, tracker, rng, effects=effects, order=order)
+
     def measure(commands: np.ndarray) -> np.ndarray:
         """The machine as the calibration sees it: commands in, tracker readings out."""
-        return tracker.measure_averaged(forward_batch(truth, commands).targets, rng)
+        if not effects:  # geometry only: the twin's direct path
+            return tracker.measure_averaged(forward_batch(truth, commands).targets, rng)
+        return run_machine(commands).readings.mean(axis=2)
+
+    def true_targets(commands: np.ndarray) -> np.ndarray:
+        """Where the targets really are (no tracker noise), for scoring."""
+        if not effects:
+            return forward_batch(truth, commands).targets
+        return run_machine(commands).true_targets
 
     half = tuple(v * 1e-3 for v in scenario.get("workspace.half_width_mm", list))
     z_layers = {k: v * 1e-3 for k, v in scenario.section("layers").items()}
@@ -134,7 +152,7 @@ def run(
             )
         layers[group] = {}
         for stage, cmds in stage_cmds.items():
-            true = forward_batch(truth, cmds).targets
+            true = true_targets(cmds)
             errs = pose_errors(poses, true, nominal.target_local())
             layers[group][stage] = max_mean_stats(errs)
             maps.setdefault(group, {})[stage] = (poses, errs)
@@ -156,7 +174,7 @@ def run(
         recorder.log_metric("coarse_relative_change", "coarse_round", k + 1, change)
     progress.step("Monte Carlo of the fine estimate (Eqs. 17-18)")
     runs = scenario.get("monte_carlo.runs", int)
-    clean = forward_batch(truth, commands_for_poses(coarse_mech, fine_poses)).targets
+    clean = true_targets(commands_for_poses(coarse_mech, fine_poses))
     from calib.nominal_targets import nominal_targets
 
     dp_clean = (clean - nominal_targets(coarse_mech, fine_poses)).reshape(-1)
@@ -192,7 +210,7 @@ def run(
         "liu_notes": list(liu_est.notes) if liu_est is not None else [],
         "eta_percent": eta,
         "eta_percent_liu_k1": (1.0 - spread["liu_k1"] / sigma_ols) * 100.0,
-        "truth_effects": [],  # geometry only: the scenario's truth carries no effect
+        "truth_effects": [e.name for e in effects],
         "paper_units": {
             "note": "the paper's Eq. 11 literally (k = 1) on H in mm and deg; mm and rad beside",
             "eta_percent": (1.0 - spread["liu_paper_deg"] / sigma_ols) * 100.0,
