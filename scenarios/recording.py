@@ -1,16 +1,34 @@
 """A rerun recording of a scenario: the machine, the targets, the errors, the estimates.
 
 Headless by default: the recording is saved to a ``.rrd`` file (``rec.save`` before any
-logging, ``rec.disconnect`` to write the footer); ``spawn_viewer`` also opens the viewer.
-MJCF has no rerun loader, so each body is logged flat under ``world/bodies/<body>`` as a
-Transform3D in world coordinates (from ``xpos``/``xquat``), with its geoms as static shapes
-in body coordinates below it. A Recorder made with no path and no viewer does nothing,
-cheaply (rerun is not even imported).
+logging, ``rec.disconnect`` on ``close`` to write the footer); ``spawn_viewer`` also opens the
+viewer. A Recorder made with no path and no viewer does nothing, cheaply (rerun is not even
+imported). See docs/recordings.md for what each scenario's recording looks like.
 
-Every timed log call sets its own timeline only (the stream's time is reset first), so a
-metric logged after a pose does not inherit the pose's time point. ``RERUN_STRICT`` is read
-when a Recorder is made (rerun itself reads it once, at import): when set, a rerun usage
-mistake raises instead of becoming a warning.
+What a study logs, and where:
+
+* ``log_mechanism``: MJCF has no rerun loader, so each body is logged flat under
+  ``world/bodies/<body>`` and its geoms as static shapes in body coordinates below it;
+  ``log_pose`` places the bodies (a world Transform3D each, from ``xpos``/``xquat``) at one
+  index of a pose timeline, ``log_targets`` the nominal and measured targets of that pose and
+  the error magnified ``scale`` times (labelled in mm) under ``world/targets/<group>``.
+* ``log_error_map``: static nodes coloured by error (viridis, grey for NaN) with a colour
+  scale in mm beside them, under ``error_maps/<stage>/<layer>``.
+* ``log_metric`` / ``log_points``: one point of ``metrics/<family>/<curve>`` on a timeline,
+  drawn as a line or as markers (a curve of one point is always drawn as a marker).
+* ``log_parameters``, ``log_text``, ``log_report``, ``log_verdict``: markdown text views (the
+  estimates by name with standard errors, the report's key numbers, the named effect);
+  ``log_bars`` a static bar chart; ``log_loop`` the loop-closing residuals before and after.
+
+Each call notes what it logged in ``self.logged`` (``recording_blueprints.Logged``). On
+``close`` the series styles are written, the first pose is copied onto the active timeline
+when that is not a pose timeline (so the machine is not empty there), and, if asked for with
+``send_blueprint``, the blueprint is built from ``self.logged`` (``build_blueprint``): only
+views that have data on the timeline the viewer opens on. Every timed log call sets its own
+timeline only (the stream's time is reset first), so a metric logged after a pose does not
+inherit the pose's time point. ``RERUN_STRICT`` is read when a Recorder is made (rerun itself
+reads it once, at import): when set, a rerun usage mistake raises instead of becoming a
+warning.
 """
 
 from __future__ import annotations
@@ -267,6 +285,7 @@ class Recorder:
         self.logged.machine_bounds.add(nominal)
         self.logged.pose_timelines.setdefault(timeline, set()).add(int(index))
         self.logged.target_groups.setdefault(entity_part(group), group)
+        self.logged.group_timelines.setdefault(entity_part(group), timeline)
 
     @_active
     def log_poses(
@@ -478,8 +497,8 @@ def node_spacing(nodes: np.ndarray) -> float:
 def colour_scale(
     bounds: Bounds, spacing: float, vmax: float, n: int = 10
 ) -> tuple[np.ndarray, list[float], np.ndarray, list[str]]:
-    """A vertical column of ``n`` boxes beside the nodes (viridis, 0 at the bottom) and three
-    labelled ticks: 0, vmax/2 and vmax in mm."""
+    """A vertical column of ``n`` boxes beside the nodes (viridis, 0 at the bottom) and two
+    labelled ticks, 0 and vmax in mm (a middle label overlaps them in a small view)."""
     size = bounds.hi - bounds.lo
     height = max(float(size.max()), 4 * spacing)
     x = bounds.hi[0] + 1.5 * spacing
@@ -488,8 +507,8 @@ def colour_scale(
     step = height / n
     centres = np.array([[x, y, z0 + (k + 0.5) * step] for k in range(n)])
     half = [0.25 * spacing, 0.25 * spacing, step / 2]
-    ticks = np.array([[x + 0.4 * spacing, y, z0 + f * height] for f in (0.0, 0.5, 1.0)])
-    return centres, half, ticks, [f"{f * vmax:.3g} mm" for f in (0.0, 0.5, 1.0)]
+    ticks = np.array([[x + 0.4 * spacing, y, z0 + f * height] for f in (0.0, 1.0)])
+    return centres, half, ticks, [f"{f * vmax:.3g} mm" for f in (0.0, 1.0)]
 
 
 def parameter_table(

@@ -5,7 +5,8 @@ targets and error arrows of each pose group (one 3D view per group), one labelle
 view per stage and layer, one plot per family of curves on the active timeline, bar charts,
 and text views (the verdict, the report's key numbers, one parameter table per stage).
 A view is made only for data that exists; a curve on another timeline than the active one
-is not given a view (rerun plots against the active timeline only).
+is not given a view (rerun plots against the active timeline only), nor is a pose group
+posed on another pose timeline (``build_blueprint(log, timeline=...)`` opens on that one).
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ class Logged:
     mechanism: bool = False
     pose_timelines: dict[str, set[int]] = field(default_factory=dict)
     target_groups: dict[str, str] = field(default_factory=dict)  # path part -> name
+    group_timelines: dict[str, str] = field(default_factory=dict)  # path part -> timeline
     machine_bounds: Bounds = field(default_factory=Bounds)
     error_maps: dict[str, ErrorMap] = field(default_factory=dict)  # entity path -> map
     series: dict[str, Series] = field(default_factory=dict)  # entity path -> curve
@@ -117,11 +119,14 @@ def _stack(rrb: Any, parts: list[Any], shares: list[float]) -> Any | None:
     return rrb.Vertical(*parts, row_shares=shares)
 
 
-def machine_views(rrb: Any, log: Logged) -> list[Any]:
+def machine_views(rrb: Any, log: Logged, active: str | None = None) -> list[Any]:
     if not (log.mechanism or log.target_groups):
         return []
     eye = log.machine_bounds.eye(rrb)
-    groups = log.target_groups or {None: None}
+    groups: dict[str | None, str | None] = dict(log.target_groups) or {None: None}
+    timeline = log.active_timeline() if active is None else active
+    here = {g: n for g, n in groups.items() if log.group_timelines.get(g) == timeline}
+    groups = here or groups  # groups posed on another timeline would be empty views
     views = []
     for g, label in groups.items():
         contents = ["world", "world/bodies/**"]
@@ -141,7 +146,7 @@ def error_map_views(rrb: Any, log: Logged) -> Any | None:
         view = rrb.Spatial3DView(
             origin=path,
             contents=["$origin/**"],
-            name=f"error map {em.stage} / {em.layer} (colour 0-{em.vmax_mm:.3g} mm)",
+            name=f"error map {em.stage} / {em.layer}, 0-{em.vmax_mm:.3g} mm",
             eye_controls=em.bounds.eye(rrb, direction=(0.35, -0.6, 1.0)),
         )
         by_layer.setdefault(em.layer, []).append(view)
@@ -187,7 +192,7 @@ def build_blueprint(log: Logged, timeline: str | None = None) -> Any:
     import rerun.blueprint as rrb
 
     timeline = timeline or log.active_timeline()
-    machine = machine_views(rrb, log)
+    machine = machine_views(rrb, log, timeline)
     maps = error_map_views(rrb, log)
     left_parts, left_shares = [], []
     if machine:

@@ -148,6 +148,7 @@ def _variant(
     readings = read_dataset(data).readings.mean(axis=2)
     calibrated = nominal.with_model(params.inject(nominal.model, loaded.values_for(params)))
     fk = forward_batch(calibrated, commands)
+    recorder.log_mechanism(nominal)
     for k in range(0, len(commands), max(1, len(commands) // 20)):
         recorder.log_pose(f"{name}_pose", k, calibrated, fk.qpos[k])
         recorder.log_targets(
