@@ -105,58 +105,42 @@ def judge_fit(
     noise = math.sqrt(3.0) * accuracy.sigma_mm
     ratio = residual_rms_mm / noise if math.isfinite(residual_rms_mm) else math.inf
     where = f"tracker accuracy {accuracy.sigma_mm:g} mm per coordinate ({accuracy.source})"
+
+    def verdict(status: str, code: int, message: str) -> Verdict:
+        return Verdict(status, code, residual_rms_mm, noise, ratio, accuracy, message, hints)
+
     if not converged:
-        return Verdict(
+        return verdict(
             "not_converged",
             EXIT_NOT_CONVERGED,
-            residual_rms_mm,
-            noise,
-            ratio,
-            accuracy,
             f"FAILED: the fit did not converge ({convergence_message or 'no criterion met'}); "
             f"residual {residual_rms_mm:.4f} mm RMS",
-            hints,
         )
     if ratio > max_ratio:
-        return Verdict(
+        return verdict(
             "poor_fit",
             EXIT_POOR_FIT,
-            residual_rms_mm,
-            noise,
-            ratio,
-            accuracy,
             f"FAILED: residual {residual_rms_mm:.4f} mm RMS is {ratio:.1f} times the "
             f"{noise:.4f} mm that the {where} explains (limit {max_ratio:g} times)",
-            hints,
         )
     if implausible:
         shown = ", ".join(implausible[:5]) + (" ..." if len(implausible) > 5 else "")
-        return Verdict(
+        return verdict(
             "poor_fit",
             EXIT_POOR_FIT,
-            residual_rms_mm,
-            noise,
-            ratio,
-            accuracy,
             f"FAILED: {len(implausible)} estimate(s) beyond a plausible size ({shown}): the fit "
             "bent the geometry to follow data the model cannot explain",
-            hints,
         )
     tail = (
         "consistent with the tracker noise"
         if ratio <= 2.0
         else "above the tracker noise: unmodelled effects remain (try `calib diagnose`)"
     )
-    return Verdict(
+    return verdict(
         "ok",
         EXIT_OK,
-        residual_rms_mm,
-        noise,
-        ratio,
-        accuracy,
         f"ok: residual {residual_rms_mm:.4f} mm RMS, {ratio:.2f} times the {noise:.4f} mm "
         f"of the {where}: {tail}",
-        hints,
     )
 
 
