@@ -1,0 +1,83 @@
+"""results/bench.md: every number of bench.json, with its target and whether it is met."""
+
+from __future__ import annotations
+
+TARGET_TEXT = {
+    "machines.hexapod.identify_speedup_vs_scipy_fd": (">=", "identification speedup vs scipy FD"),
+    "machines.hexapod.fk_batch_poses_per_s": (">=", "batched FK poses/s"),
+    "scenario_optimal_poses_s": ("<=", "optimal_poses (s)"),
+    "scenario_liu_vs_ols_s": ("<=", "liu_vs_ols with figures (s)"),
+    "scenario_liu_vs_ols_no_figures_s": ("<=", "liu_vs_ols without figures (s)"),
+    "scenario_hexapod_paper_s": ("<=", "hexapod_paper (s)"),
+}
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return f"{v:.4g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.2e}"
+    return str(v)
+
+
+def _get(out: dict, key: str):
+    v = out
+    for k in key.split("."):
+        v = v.get(k) if isinstance(v, dict) else None
+    return v
+
+
+def bench_markdown(out: dict) -> str:
+    lines = [
+        "# make bench",
+        "",
+        f"{out['cpu_count']} CPUs; a shared machine's timings are noisy, so compare ratios "
+        "measured in the same run. Written with bench.json by `python -m bench`.",
+        "",
+        "## Targets",
+        "",
+        "| number | value | target | met |",
+        "|---|---|---|---|",
+    ]
+    for key, target in out["targets"].items():
+        op, label = TARGET_TEXT.get(key, ("", key))
+        value = _get(out, key)
+        met = out["meets_targets"].get(key)
+        met_text = "not measured" if met is None else ("met" if met else "**not met**")
+        lines.append(f"| {label} (`{key}`) | {_fmt(value)} | {op} {target} | {met_text} |")
+    for key, why in out.get("not_measured", {}).items():
+        lines.append(f"| `{key}` | - | {why} | not measured |")
+    machines = out["machines"]
+    names = list(machines)
+    keys = [k for k in machines[names[0]] if k != "poses"]
+    lines += [
+        "",
+        "## Machines",
+        "",
+        "Ours: calib.identify (robust, the default; `plain` is robust=False), fresh model, best "
+        f"of {machines[names[0]].get('identify_ours_repeats')}. Baseline: "
+        f"`scipy.optimize.least_squares({out['scipy_options']})` over the same identified "
+        "parameters on a fresh model, best of `identify_scipy_fd_runs`. Differences in mm "
+        "(lengths) and deg (angles) over the identified parameters.",
+        "",
+        "| number | " + " | ".join(names) + " |",
+        "|---|" + "---|" * len(names),
+    ]
+    for k in keys:
+        lines.append(f"| {k} | " + " | ".join(_fmt(machines[n].get(k)) for n in names) + " |")
+    lines.append("| poses | " + " | ".join(machines[n]["poses"] for n in names) + " |")
+    lines += ["", "## Scenarios (whole runs, temporary results root)", ""]
+    lines += ["| scenario | seconds |", "|---|---|"]
+    for k, v in out.items():
+        if k.startswith("scenario_") and k.endswith("_s"):
+            lines.append(f"| {k[len('scenario_') : -2]} | {_fmt(v)} |")
+    for name in out.get("scenarios_skipped", []):
+        lines.append(f"| {name} | not run (BENCH_ALL=1 runs it) |")
+    for name, error in out.get("scenario_errors", {}).items():
+        lines.append(f"| {name} | failed: {error.splitlines()[0][:200]} |")
+    lines.append("")
+    return "\n".join(lines)

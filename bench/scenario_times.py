@@ -1,0 +1,62 @@
+"""Wall time of every scenario (scenarios/*.toml) run whole through scenarios.runner into a
+temporary results root, never results/. optimal_poses and diagnosis_benchmark only with
+BENCH_ALL=1 (minutes each).
+
+liu_vs_ols is also timed without figures and recording: the scenario has no switch for it, so
+the benchmark stubs its figure writers (scenarios.liu_vs_ols_figures.write_figures and the
+parameter bar charts) for that one run; the study itself is unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+from unittest import mock
+
+from scenarios.config import REPO_ROOT
+from scenarios.runner import run_scenario
+
+SLOW = ("optimal_poses", "diagnosis_benchmark")  # minutes each
+
+
+def scenario_names(everything: bool) -> list[str]:
+    names = sorted(p.stem for p in (REPO_ROOT / "scenarios").glob("*.toml"))
+    return [n for n in names if everything or n not in SLOW]
+
+
+def _timed(name: str, root: Path, **kwargs) -> float:
+    t0 = time.perf_counter()
+    run_scenario(str(REPO_ROOT / "scenarios" / f"{name}.toml"), root, quiet=True, **kwargs)
+    return time.perf_counter() - t0
+
+
+def scenario_times(everything: bool | None = None) -> tuple[dict, list[str], dict]:
+    """{scenario_<name>_s: seconds}, the scenarios left out, and {name: error} of those that
+    failed (a failing scenario does not stop the benchmark; its time is left out)."""
+    if everything is None:
+        everything = os.environ.get("BENCH_ALL", "") in ("1", "yes", "true")
+    out: dict = {}
+    errors: dict = {}
+    names = scenario_names(everything)
+    skipped = [n for n in scenario_names(True) if n not in names]
+    with tempfile.TemporaryDirectory(prefix="bench-results-") as tmp:
+        root = Path(tmp)
+        for name in names:
+            try:
+                out[f"scenario_{name}_s"] = _timed(name, root)
+            except Exception as exc:  # someone else's scenario broken: say so, go on
+                errors[name] = f"{type(exc).__name__}: {exc}"
+                print(f"scenario {name} FAILED: {errors[name]}", flush=True)
+                continue
+            print(f"scenario {name} {out[f'scenario_{name}_s']:.1f} s", flush=True)
+            if name == "liu_vs_ols":
+                with (
+                    mock.patch("scenarios.liu_vs_ols_figures.write_figures", lambda *a: {}),
+                    mock.patch("scenarios.liu_vs_ols.parameter_bars_png", lambda *a: None),
+                ):
+                    t = _timed(name, root / "no_figures", record=False)
+                out["scenario_liu_vs_ols_no_figures_s"] = t
+                print(f"scenario liu_vs_ols without figures or recording {t:.1f} s", flush=True)
+    return out, skipped, errors
