@@ -38,6 +38,10 @@ STUDIES = {
     "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
     "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
     "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
+    "diagnosis_benchmark": (
+        "scenarios.diagnosis_benchmark",
+        "scenarios.diagnosis_benchmark_report",
+    ),
 }
 
 

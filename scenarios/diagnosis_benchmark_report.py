@@ -1,0 +1,112 @@
+"""report.md of the diagnosis_benchmark scenario: the confusion table and the goal's rates."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def _pct(v: float | None) -> str:
+    return "n/a" if v is None else f"{100 * v:.0f} %"
+
+
+def confusion_table(confusion: dict[str, dict[str, int]]) -> list[str]:
+    """Markdown rows: true kind (rows) -> named effect (columns), counts."""
+    named = sorted({n for row in confusion.values() for n in row})
+    lines = [
+        "| true kind \\ named | " + " | ".join(named) + " |",
+        "|---|" + "---|" * len(named),
+    ]
+    for kind in sorted(confusion):
+        row = confusion[kind]
+        lines.append(f"| {kind} | " + " | ".join(str(row.get(n, "")) for n in named) + " |")
+    return lines
+
+
+def report(s: dict[str, Any]) -> str:
+    goal = s["goal"]
+    ok = (
+        s["correct_rate"] is not None
+        and s["correct_rate"] >= goal["correct_rate_min"]
+        and (s["false_alarm_rate"] or 0.0) <= goal["false_alarm_rate_max"]
+        and s["heldout_worse_count"] <= goal["heldout_worse_count_max"]
+    )
+    lines = [
+        "# Diagnosis benchmark: many random truths, one undeclared effect each",
+        "",
+        f"{s['n_cases']} cases on {', '.join(s['models'])}; runtime {s['runtime_s']:.0f} s.",
+        "",
+        f"* right names (multiplier >= {goal['strong_multiplier']:g} x noise): "
+        f"**{_pct(s['correct_rate'])}** of {s['n_correct_rate_cases']} "
+        f"(goal >= {_pct(goal['correct_rate_min'])}); first name right: "
+        f"{_pct(s.get('first_name_correct_rate'))}",
+        f"* false alarms on geometry-only truths: **{_pct(s['false_alarm_rate'])}** of "
+        f"{s['n_none_cases']} (goal <= {_pct(goal['false_alarm_rate_max'])})",
+        f"* audit (held-out) error worse after adding the named effect "
+        f"(> {goal['worse_factor']:g} x before): **{s['heldout_worse_count']}** of "
+        f"{s['n_audited']} audited (goal 0)",
+        f"* goal met: **{'yes' if ok else 'no'}**",
+        "",
+        "## Confusion (true kind -> named)",
+        "",
+        *confusion_table(s["confusion"]),
+        "",
+        "## Right names by magnitude (all kinds but none)",
+        "",
+        "| multiplier (x noise) | cases | right |",
+        "|---|---|---|",
+        *[
+            f"| {m} | {v['n']} | {_pct(v['correct_rate'])} |"
+            for m, v in s["correct_rate_by_multiplier"].items()
+        ],
+        "",
+        "## Right names by kind (multiplier >= strong)",
+        "",
+        "| kind | cases | right | accepted names |",
+        "|---|---|---|---|",
+        *[
+            f"| {k} | {v['n']} | {_pct(v['correct_rate'])} | "
+            f"{', '.join(s['accepted_names'].get(k, []))} |"
+            for k, v in s["correct_rate_by_kind"].items()
+        ],
+        "",
+    ]
+    if s.get("heldout_worse_cases"):
+        lines += ["Audit error worse in:", ""]
+        lines += [f"* {c}" for c in s["heldout_worse_cases"]]
+        lines.append("")
+    if s.get("not_audited"):
+        lines += ["Not audited (the named correction exists only inside the diagnosis):", ""]
+        lines += [f"* {c}" for c in s["not_audited"]]
+        lines.append("")
+    if s.get("skipped_cases"):
+        lines += ["Cases skipped:", ""]
+        lines += [f"* {c}" for c in s["skipped_cases"]]
+        lines.append("")
+    if s.get("skipped"):
+        lines += ["Skipped kinds:", ""]
+        lines += [f"* {c['machine']}: {c['kind']}: {c['reason']}" for c in s["skipped"]]
+        lines.append("")
+    lines += [
+        "## Cases",
+        "",
+        "| machine | kind | x noise | seed | scaled argument | named | right | audit before -> "
+        "after (mm, 3D RMS) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for c in s["cases"]:
+        arg = (
+            f"{c['scaled_argument']} = {c['argument_value']:.4g}" if "scaled_argument" in c else ""
+        )
+        after = c.get("audit_rms_after_mm")
+        audit = (
+            f"{c['audit_rms_before_mm']:.4f} -> {after:.4f}"
+            if after is not None
+            else f"{c.get('audit_rms_before_mm', float('nan')):.4f} -> n/a"
+        )
+        lines.append(
+            f"| {c['machine']} | {c['kind']} | {c['multiplier']:g} | {c['seed']} | {arg} | "
+            f"{c.get('named', c.get('skipped', ''))} | {'yes' if c.get('correct') else 'no'} | "
+            f"{audit} |"
+        )
+    lines.append("")
+    return "\n".join(lines)

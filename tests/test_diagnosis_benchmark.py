@@ -1,0 +1,106 @@
+"""The diagnosis_benchmark scenario on a reduced copy: its summary contract, a strong clear case
+named right, geometry-only truths without a false alarm."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from scenarios.config import ScenarioError, load_scenario
+from scenarios.diagnosis_benchmark import ACCEPTED, SCALED, is_correct, not_applicable
+from scenarios.machine_setup import EFFECTS
+from scenarios.runner import run_scenario
+from twin.mechanism import Mechanism
+
+ROOT = Path(__file__).resolve().parent.parent
+COMMITTED = ROOT / "scenarios" / "diagnosis_benchmark.toml"
+
+
+def _reduced(tmp_path: Path, **benchmark) -> Path:
+    """The committed file with absolute model paths and a smaller [benchmark] / [plan]."""
+    text = COMMITTED.read_text()
+    data = tomllib.loads(text)
+    lines = [
+        'name = "diagnosis_benchmark_small"',
+        'study = "diagnosis_benchmark"',
+        'machine = "hexapod"',
+        f'model = "{ROOT / data["model"]}"',
+        f'error_model = "{ROOT / data["error_model"]}"',
+        "[truth.random]",
+        *(f"{k} = {json.dumps(v)}" for k, v in data["truth"]["random"].items()),
+        "[tracker]",
+        *(f"{k} = {json.dumps(v)}" for k, v in data["tracker"].items()),
+        "[plan]",
+        "calibration_poses = 80",
+        "test_poses = 30",
+        "audit_poses = 30",
+        "[benchmark]",
+        *(f"{k} = {json.dumps(v)}" for k, v in benchmark.items()),
+    ]
+    path = tmp_path / "diagnosis_benchmark_small.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("bench")
+    path = _reduced(
+        tmp,
+        kinds=["lead_error_harmonic"],
+        multipliers=[10.0],
+        seeds=[1],
+        none_seeds=[101, 102],
+    )
+    return run_scenario(str(path), tmp / "results", quiet=True, record=False)
+
+
+def test_committed_file_is_a_meaningful_benchmark():
+    s = load_scenario("diagnosis_benchmark")
+    from scenarios.diagnosis_benchmark import cases
+
+    args, skipped = cases(s)
+    kinds = {a[3] for a in args}
+    assert len(kinds - {"none"}) >= 6 and "none" in kinds
+    assert sum(a[3] == "none" for a in args) >= 9
+    assert {a[4] for a in args if a[3] != "none"} >= {1.0, 3.0, 10.0}
+    assert len(args) >= 60 and not skipped
+
+
+def test_every_twin_effect_has_a_mapping_and_a_scaled_argument():
+    assert set(EFFECTS) <= set(ACCEPTED) and set(EFFECTS) == set(SCALED)
+    assert is_correct("thermal_warmup", "zero_drift")
+    assert not is_correct("thermal_warmup", "thermal_growth+reflector_offsets")
+    assert is_correct("none", "none") and not is_correct("none", "backlash")
+    hexapod = Mechanism.from_xml(ROOT / "models/hexapod_rrrprr.xml")
+    assert not_applicable("joint_backlash", hexapod) is not None  # all prismatic
+    assert not_applicable("lead_error_harmonic", hexapod) is None
+
+
+def test_unknown_kind_is_rejected_at_load(tmp_path):
+    path = _reduced(tmp_path, kinds=["lead_eror"], multipliers=[1.0], seeds=[1], none_seeds=[])
+    with pytest.raises(ScenarioError, match="lead_error"):
+        load_scenario(str(path))
+
+
+@pytest.mark.accuracy
+def test_summary_contract_clear_case_and_no_false_alarm(run):
+    s, out_dir = run
+    for key in ("n_cases", "confusion", "correct_rate", "false_alarm_rate", "heldout_worse_count"):
+        assert key in s
+    assert s["n_cases"] == 3
+    assert json.loads((out_dir / "summary.json").read_text())["n_cases"] == 3
+    assert "Confusion" in (out_dir / "report.md").read_text()
+    strong = next(c for c in s["cases"] if c["kind"] == "lead_error_harmonic")
+    # sized to 10 x the noise (per coordinate, noise-free) by a linear scale of the amplitude
+    assert strong["effect_rms_over_sigma"] == pytest.approx(10.0, rel=0.05)
+    assert strong["named"] == "lead_error" and strong["correct"]
+    assert strong["audit_rms_after_mm"] < strong["audit_rms_before_mm"]
+    assert s["confusion"]["lead_error_harmonic"] == {"lead_error": 1}
+    assert s["confusion"]["none"] == {"none": 2}
+    assert s["correct_rate"] == 1.0
+    assert s["false_alarm_rate"] == 0.0
+    assert s["heldout_worse_count"] == 0
