@@ -91,13 +91,12 @@ def actuator_order_hint(
     measured: np.ndarray,
     actuator_names: tuple[str, ...],
     frame: str = "base",
+    nominal: np.ndarray | None = None,
 ) -> str | None:
-    """Two actuator columns whose exchange makes the nominal residual clearly smaller."""
+    """Two actuator columns whose exchange makes the nominal residual clearly smaller;
+    ``nominal``: the nominal targets at ``commands`` (None: they did not solve)."""
     x0 = np.zeros(model.n_parameters)
-    try:
-        base = _rms(measured, model.predict(x0, commands).targets, frame)
-    except TwinError:
-        base = np.inf
+    base = np.inf if nominal is None else _rms(measured, nominal, frame)
     best, best_pair = base, None
     for i, j in itertools.combinations(range(commands.shape[1]), 2):
         swapped = commands.copy()
@@ -140,7 +139,9 @@ def likely_causes(
         ):
             if hint:
                 hints.append(hint)
-    hint = actuator_order_hint(model, commands, measured, model.nominal.actuator_names, frame)
+    hint = actuator_order_hint(
+        model, commands, measured, model.nominal.actuator_names, frame, nominal
+    )
     if hint:
         hints.append(hint)
     return hints

@@ -107,14 +107,19 @@ def weakly_identified(
     return out
 
 
+def correlation_matrix(covariance: np.ndarray) -> np.ndarray:
+    """cov_ij / (std_i std_j); NaN where a standard deviation is zero."""
+    cov = np.asarray(covariance, dtype=float)
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return cov / np.outer(std, std)
+
+
 def collinear_groups(
     names: tuple[str, ...], covariance: np.ndarray, threshold: float = COLLINEAR_R
 ) -> list[list[str]]:
     """Groups of parameters joined by correlations above ``threshold`` (union of pairs)."""
-    cov = np.asarray(covariance, dtype=float)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(std, std)
+    corr = correlation_matrix(covariance)
     parent = list(range(len(names)))
 
     def root(i: int) -> int:

@@ -127,11 +127,9 @@ def registration_jacobian(
         np.asarray(measured_tracker, dtype=float).reshape(-1, 3)
         @ (matrix_from_rotvec(x[3:]) @ start.rotation).T
     )
-    n = len(q)
-    jac = np.zeros((n, 3, 6))
-    jac[:, :, :3] = np.eye(3)
-    jac[:, :, 3:] = -skew(q) @ left_jacobian_so3(x[3:])
-    return jac.reshape(n * 3, 6)
+    jac = rigid_motion_span(q)  # the rotation increment turns about the tracker head
+    jac[:, 3:] = jac[:, 3:] @ left_jacobian_so3(x[3:])
+    return jac
 
 
 def rigid_motion_span(points_base: np.ndarray) -> np.ndarray:

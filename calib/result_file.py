@@ -19,6 +19,7 @@ import numpy as np
 
 from calib.atomic_files import write_json_atomic
 from calib.exceptions import CalibError
+from calib.prior import correlation_matrix
 from calib.registration import Registration, RegistrationError
 
 FORMAT = "pkm-calib-result"
@@ -57,10 +58,7 @@ def correlation_pairs(
     names: tuple[str, ...], covariance: np.ndarray, threshold: float = 0.9
 ) -> list[dict[str, Any]]:
     """Pairs of estimated parameters whose correlation magnitude exceeds ``threshold``."""
-    cov = np.asarray(covariance, dtype=float)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(std, std)
+    corr = correlation_matrix(covariance)
     out = []
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
