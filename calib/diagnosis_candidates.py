@@ -14,14 +14,18 @@ commands + offsets) and show through J_act D:
 * ``backlash``          -direction of approach, half play >= 0 per actuator
 * ``thermal_growth``    w h(t) q on prismatic actuators (strain of each screw/leg in time)
 * ``zero_drift``        u_a h(t) per actuator (each zero drifting in time)
-* ``gravity_compliance`` -c_a (tau_own + m tau_payload), compliance c_a >= 0, payload m scanned
+* ``gravity_compliance`` -c_a (tau_own + m tau_payload), compliance c_a >= 0, payload m scanned;
+  on a model without declared masses only a tool payload loads it: -(c_a m) tau_payload, the
+  products c_a m >= 0 (mass and compliance are not separable)
 
 with h(t) = tau (1 - exp(-t / tau)) (h = t for tau = inf: a linear drift; h'(0) = 1, so the
 coefficient is the initial rate whatever tau), tau scanned over the measurement span.
 
 Geometric candidates are columns of a richer error model (``reflector_offsets``,
-``joint_axis_errors``); ``tracker_drift`` moves every reading by h(t) v; ``tracker_scale``
-stretches readings about the tracker head.
+``joint_axis_errors``); ``thermal_expansion`` grows the whole structure in time, every target
+moving by w h(t) p (p in the base frame: the machine expands about where it stands);
+``tracker_drift`` moves every reading by h(t) v; ``tracker_scale`` stretches readings about
+the tracker head.
 """
 
 from __future__ import annotations
@@ -41,7 +45,13 @@ GRAVITY_SKIPPED = (
     "gravity_compliance skipped: the model declares no masses (MuJoCo's bounded defaults), so "
     "its gravity loads would be invented"
 )
+GRAVITY_PAYLOAD_ONLY = (
+    "gravity_compliance under a tool payload only: the model declares no masses (MuJoCo's "
+    "bounded defaults), so its own weight is unknown; the payload's mass and the compliances "
+    "are not separable and their products are reported"
+)
 NO_SHAPE = float("nan")
+PHASE_STEP = 1.0  # rad of phase slip over the stroke between neighbouring grid pitches
 
 
 @dataclass(frozen=True)
@@ -104,10 +114,12 @@ def _tau_grid(ctx: Context) -> np.ndarray:
 
 
 def _pitch_grid(ctx: Context) -> np.ndarray:
-    """Pitches 2-20 mm, uniform in 1/pitch with a phase slip < 0.5 rad over the stroke."""
+    """Pitches 2-20 mm, uniform in 1/pitch with a phase slip of PHASE_STEP over the stroke
+    (a sinusoid 0.5 rad off the nearest grid pitch still correlates 0.99 with it; the
+    finalists are refined between their grid neighbours)."""
     q = ctx.commands[:, ctx.is_slide]
     stroke = max(float(np.max(np.ptp(q, axis=0))) if q.size else 0.0, 1e-3)
-    step = 0.5 / (2 * np.pi * stroke)
+    step = PHASE_STEP / (2 * np.pi * stroke)
     freq = np.arange(1 / 20e-3, 1 / 2e-3 + step, step)
     return 1.0 / freq
 
@@ -155,11 +167,21 @@ def _gravity(ctx: Context, payload: float) -> np.ndarray:
     return _diag(-tau, np.ones(tau.shape[1], bool))
 
 
+def _gravity_payload(ctx: Context, shape: float) -> np.ndarray:
+    assert ctx.gravity is not None
+    return _diag(-ctx.gravity.unit_payload, np.ones(ctx.gravity.unit_payload.shape[1], bool))
+
+
 def _tracker_drift(ctx: Context, tau: float) -> np.ndarray:
     h = drift_shape(ctx.time, tau)
     n, r = len(h), ctx.j_act.shape[1] if ctx.j_act is not None else 3 * ctx.targets.shape[1]
     eye = np.tile(np.eye(3), (r // 3, 1))  # (R, 3)
     return h[:, None, None] * eye[None, :, :] * np.ones((n, 1, 1))
+
+
+def _expansion(ctx: Context, tau: float) -> np.ndarray:
+    h = drift_shape(ctx.time, tau)
+    return (h[:, None] * ctx.targets.reshape(len(h), -1))[:, :, None]
 
 
 def _tracker_scale(ctx: Context, shape: float) -> np.ndarray:
@@ -266,7 +288,21 @@ def default_candidates(
                 explains="joint angle",
             )
         )
-    if not masses_defaulted:
+    if masses_defaulted:
+        out.append(
+            Candidate(
+                "gravity_compliance",
+                tuple(f"{n}.compliance_x_payload" for n in a),
+                tuple(("mm/kN kg" if s else "deg/(kN m) kg") for s in slide),
+                tuple(f * 1e3 for f in fac),
+                offsets=_gravity_payload,
+                nonnegative=(True,) * len(a),
+                physics="a negative compliance (an actuator lengthening under its load)",
+                explains="gravity load",
+                notes=(GRAVITY_PAYLOAD_ONLY,),
+            )
+        )
+    else:
         out.append(
             Candidate(
                 "gravity_compliance",
@@ -282,6 +318,20 @@ def default_candidates(
                 explains="gravity load",
             )
         )
+    out.append(
+        Candidate(
+            "thermal_expansion",
+            ("growth_per_pose" if time_unit == "pose" else "growth_per_s",),
+            (f"ppm {per_t}",),
+            (1e6,),
+            columns=_expansion,
+            grid=_tau_grid,
+            shape_name="time_constant",
+            shape_unit=time_unit,
+            shape_log=True,
+            explains="time",
+        )
+    )
     out.append(
         Candidate(
             "tracker_drift",
@@ -324,11 +374,14 @@ def default_candidates(
 
 def library(ctx: Context, masses_defaulted: bool) -> list[Candidate]:
     """The library for the machine and data of ``ctx``."""
-    return default_candidates(
+    out = default_candidates(
         ctx.actuator_names,
         ctx.is_slide,
-        masses_defaulted=masses_defaulted or ctx.gravity is None,
+        masses_defaulted=masses_defaulted or (ctx.gravity is not None and ctx.gravity.payload_only),
         time_unit=ctx.time_unit,
         extra_groups=None if ctx.extra is None else ctx.extra.groups,
         tracker_head=ctx.head is not None,
     )
+    if ctx.gravity is None:  # no loads computed: nothing for a compliance to act on
+        out = [c for c in out if c.name != "gravity_compliance"]
+    return out

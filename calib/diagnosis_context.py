@@ -203,8 +203,8 @@ def build_context(
         pred = model.predict(values, commands)
         qpos, targets = pred.qpos, pred.targets
     loads = None
-    if gravity and not nominal.masses_defaulted:
-        loads = gravity_loads(model.mechanism(values), qpos)
+    if gravity:
+        loads = gravity_loads(model.mechanism(values), qpos, nominal.masses_defaulted)
     j_act, extra, rot = None, None, None
     if full:
         j_act, extra = sensitivities(model, values, qpos)

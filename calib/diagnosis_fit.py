@@ -26,6 +26,7 @@ SCHEMES = ("blocked", "random")
 N_FINALISTS = 3
 INNER_FOLDS = 4
 RCOND = 1e-10
+REFINE_XTOL = 1e-2  # a shape refined to 1 % of the span between its grid neighbours
 
 
 def fold_labels(time: np.ndarray, folds: int, scheme: str, seed: int = 0) -> np.ndarray:
@@ -101,12 +102,17 @@ def fit(
     xp = xt - q @ (q.T @ xt)
     rp = rt - q @ (q.T @ rt)
     scale = np.linalg.norm(xp, axis=0)
-    scale[scale < 1e-300] = 1.0
-    if lower is not None and np.any(np.isfinite(lower)):
-        res = optimize.lsq_linear(xp / scale, rp, bounds=(lower * scale, np.inf), method="bvls")
-        theta = res.x / scale
-    else:
-        theta = np.linalg.lstsq(xp / scale, rp, rcond=RCOND)[0] / scale
+    # a column the data does not see (a joint no load reaches, a harmonic of a joint that
+    # did not turn, or one the geometry spans): its parameter stays 0, not 1 / 0
+    live = scale > RCOND * max(float(scale.max(initial=0.0)), 1e-300)
+    theta = np.zeros(k)
+    if np.any(live):
+        a, sc = xp[:, live] / scale[live], scale[live]
+        if lower is not None and np.any(np.isfinite(lower[live])):
+            res = optimize.lsq_linear(a, rp, bounds=(lower[live] * sc, np.inf), method="bvls")
+            theta[live] = res.x / sc
+        else:
+            theta[live] = np.linalg.lstsq(a, rp, rcond=RCOND)[0] / sc
     return Fit(theta, gplus @ (rt - xt @ theta))
 
 
@@ -188,7 +194,7 @@ def _refine(prob, fixed, cand, ctx, grid, i, poses) -> float:
 
     a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
     res = optimize.minimize_scalar(
-        cost, bounds=(a, b), method="bounded", options={"xatol": 2e-3 * abs(b - a) + 1e-15}
+        cost, bounds=(a, b), method="bounded", options={"xatol": REFINE_XTOL * abs(b - a) + 1e-15}
     )
     return float(np.exp(res.x)) if cand.shape_log else float(res.x)
 
@@ -316,12 +322,18 @@ def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluat
     xt = _flat(xs, everything).reshape(len(rt), -1)
     xp = xt - q @ (q.T @ xt)
     rp = rt - q @ (q.T @ rt)
-    theta = np.linalg.lstsq(xp, rp, rcond=RCOND)[0]
+    norms = np.linalg.norm(xp, axis=0)
+    live = norms > RCOND * max(float(norms.max(initial=0.0)), 1e-300)
+    theta = np.zeros(xp.shape[1])
+    theta[live] = np.linalg.lstsq(xp[:, live], rp, rcond=RCOND)[0]
     resid = rp - xp @ theta
     dof = max(ev.n_rows - q.shape[1] - xt.shape[1] - sum(c.shaped for c in cands), 1)
     sigma2 = float(resid @ resid) / dof
-    cov = sigma2 * np.linalg.pinv(xp.T @ xp, rcond=RCOND)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    std = np.full(xp.shape[1], np.nan)  # a parameter the data does not see: no std error
+    if np.any(live):
+        a = xp[:, live] / norms[live]
+        cov = sigma2 * np.linalg.pinv(a.T @ a, rcond=RCOND) / np.outer(norms[live], norms[live])
+        std[live] = np.sqrt(np.clip(np.diag(cov), 0, None))
     shape_std = []
     for i, (c, s) in enumerate(zip(cands, ev.shapes, strict=True)):
         if not c.shaped or not np.isfinite(s) or c.shape_name == "harmonic":

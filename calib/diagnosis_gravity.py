@@ -7,7 +7,10 @@ dq_free = -C_free^+ C_act dq_act (C the closure Jacobian), so by virtual work th
 forces are tau = T^T qfrc_bias with T = [I; -C_free^+ C_act] (a serial chain: T = I).
 
 Two loads per pose: the model's own masses, and a unit mass (1 kg) at the tool site, so that
-an undeclared payload can be scanned (its mass is a shape parameter of the candidate).
+an undeclared payload can be scanned (its mass is a shape parameter of the candidate). A model
+whose masses MuJoCo defaulted (a kinematics-only MJCF) has no own weight to speak of: ``own``
+is then zero (``payload_only``) and only the tool payload's load is known, whose mass the
+candidate cannot separate from the compliance.
 """
 
 from __future__ import annotations
@@ -29,10 +32,12 @@ class GravityLoads:
     own: np.ndarray  # (N, A) actuator force/torque holding the model's masses (N or N m)
     unit_payload: np.ndarray  # (N, A) the same for 1 kg at the tool site
     moving_mass_kg: float  # total mass of the bodies below the world
+    payload_only: bool = False  # the model's masses are unknown: ``own`` is zero
 
 
-def gravity_loads(mech: Mechanism, qpos: np.ndarray) -> GravityLoads:
-    """Actuator loads of the model's masses and of a unit tool payload at each ``qpos``."""
+def gravity_loads(mech: Mechanism, qpos: np.ndarray, payload_only: bool = False) -> GravityLoads:
+    """Actuator loads of the model's masses and of a unit tool payload at each ``qpos``
+    (``payload_only``: the masses are unknown, ``own`` is zero)."""
     model = copy.deepcopy(mech.model)
     g = np.asarray(model.opt.gravity, dtype=float)
     if np.linalg.norm(g) == 0:  # kinematics models run with gravity off: put it back
@@ -59,4 +64,6 @@ def gravity_loads(mech: Mechanism, qpos: np.ndarray) -> GravityLoads:
             t[free] = -np.linalg.lstsq(c[:, free], c[:, act], rcond=None)[0]
         own[k] = t.T @ bias
         unit[k] = t.T @ payload
+    if payload_only:
+        return GravityLoads(np.zeros_like(own), unit, 0.0, payload_only=True)
     return GravityLoads(own, unit, float(np.sum(m.body_mass[1:])))

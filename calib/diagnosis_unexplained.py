@@ -109,3 +109,36 @@ def kernel_heldout(
             sse[test] = np.sum(corrected(test) ** 2, axis=1)
         out[scheme] = sse
     return out
+
+
+def residual_structure(
+    r: np.ndarray,
+    targets: np.ndarray,
+    commands: np.ndarray,
+    order: np.ndarray,
+    keep: np.ndarray | None = None,
+) -> dict[str, float]:
+    """Spearman rank correlation of each pose's residual size with where and when it was
+    measured: tool position x, y, z (space), mean actuator value (actuator coordinates) and
+    measurement order (time). Values near 0 mean no structure along that direction.
+
+    ``keep`` (same shape as ``r``) marks the rows to use; a pose with none is left out."""
+    keep = np.ones(r.shape, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    count = keep.sum(axis=1)
+    some = count > 0
+    size = np.sqrt(np.sum(np.where(keep, r, 0.0) ** 2, axis=1)[some] / count[some])
+    centre = targets.mean(axis=1)[some]
+    commands = np.asarray(commands)[some]
+    order = np.asarray(order)[some]
+    probes = {
+        "x": centre[:, 0],
+        "y": centre[:, 1],
+        "z": centre[:, 2],
+        "mean_actuator": commands.mean(axis=1),
+        "order": np.asarray(order, dtype=float),
+    }
+    out = {}
+    for name, v in probes.items():
+        rho = stats.spearmanr(size, v).statistic if np.ptp(v) > 0 else 0.0
+        out[name] = float(np.nan_to_num(rho))
+    return out

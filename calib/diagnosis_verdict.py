@@ -89,7 +89,7 @@ def effect_parameters(
             f = c.factors[j]
             entry[c.parameters[j]] = {
                 "value": float(ev.fit.theta[start + j] * f),
-                "std": float(u.std[start + j] * f),
+                "std": float(u.std[start + j] * f) if np.isfinite(u.std[start + j]) else None,
                 "unit": c.units[j],
             }
         if c.shaped:

@@ -12,6 +12,7 @@ from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.effects import (
     ActuatorGain,
     Backlash,
+    EncoderEccentricity,
     GravityCompliance,
     JointBacklash,
     JointCompliance,
@@ -41,6 +42,7 @@ EFFECTS = {
     "actuator_gain": ActuatorGain,
     "reflector_offset": ReflectorOffset,
     "tracker_air_temperature": TrackerAirTemperature,
+    "encoder_eccentricity": EncoderEccentricity,
 }
 EFFECT_EXCLUDED_ARGS = ("name",)  # the effect's label in reports, not a physical argument
 

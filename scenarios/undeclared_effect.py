@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from calib.diagnosis import diagnose, effect_offsets
+from calib.diagnosis import diagnose, effect_offsets, effect_target_shifts
+from calib.diagnosis_figure import save_diagnosis_png
 from calib.identify import bind_dataset, identify
 from calib.model import CalibrationModel
 from calib.scoring import max_mean_stats, pose_errors_between
@@ -27,6 +28,22 @@ from scenarios.twin_datasets import measured_dataset, through_file
 from twin.kinematics_batch import forward_batch
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
+
+FIGURE = "diagnosis.png"  # the residual against the variable that explains it
+
+
+def errors_3d(measured: np.ndarray, before: np.ndarray, after: np.ndarray) -> dict[str, dict]:
+    """The 3D position error per reading on the test poses, before and after (mm)."""
+
+    def stats(pred: np.ndarray) -> dict[str, float]:
+        norms = np.linalg.norm(measured - pred, axis=-1) * 1e3
+        return {
+            "rms_mm": float(np.sqrt(np.mean(norms**2))),
+            "mean_mm": float(np.mean(norms)),
+            "max_mm": float(np.max(norms)),
+        }
+
+    return {"before": stats(before), "after": stats(after)}
 
 
 def run(
@@ -75,43 +92,42 @@ def run(
     if diag.geometry_correction is not None:
         after_values[result.estimated] += diag.geometry_correction
     local = nominal.target_local()
-    before_pred = model.predict(result.values, test.commands).targets
-    shift = (
-        effect_offsets(
-            model, after_values, test.commands, np.asarray(test_ds.order), diag.coefficients
+    timing = dict(time_origin=diag.time_origin, time_unit=diag.time_unit)
+
+    def with_effects(commands: np.ndarray, order: np.ndarray) -> np.ndarray:
+        """Targets predicted with the named effects: actuator offsets through the kinematics,
+        the effects on the readings (geometry beyond the error model, thermal expansion,
+        tracker drift and scale) as the diagnosis fitted them."""
+        coef = diag.coefficients
+        shift = effect_offsets(model, after_values, commands, order, coef, **timing)
+        pred = forward_batch(model.mechanism(after_values), commands + shift, check_stroke=False)
+        return pred.targets + effect_target_shifts(
+            model, result.values, commands, order, coef, tracker_position_m=head, **timing
         )
-        if diag.coefficients
-        else 0.0
-    )
-    after_pred = forward_batch(
-        model.mechanism(after_values), test.commands + shift, check_stroke=False
-    ).targets
-    cal_after = forward_batch(
-        model.mechanism(after_values),
-        cal.commands
-        + (
-            effect_offsets(
-                model, after_values, cal.commands, np.asarray(cal_ds.order), diag.coefficients
-            )
-            if diag.coefficients
-            else 0.0
-        ),
-        check_stroke=False,
-    ).targets
+
+    before_pred = model.predict(result.values, test.commands).targets
+    after_pred = with_effects(test.commands, np.asarray(test_ds.order))
+    cal_after = with_effects(cal.commands, np.asarray(cal_ds.order))
     rms_before = float(
         np.sqrt(np.mean((cal.measured - model.predict(result.values, cal.commands).targets) ** 2))
     )
-    scale = float(diag.coefficients.get("tracker_scale", [0.0])[0])
-    # a tracker scale error stretches the readings about the head: predict it the same way
-    after_pred = after_pred + scale * (after_pred - head)
-    cal_after = cal_after + scale * (cal_after - head)
     rms_after = float(np.sqrt(np.mean((cal.measured - cal_after) ** 2)))
+    figure = None
+    if diag.plot is not None:
+        save_diagnosis_png(diag, out_dir / FIGURE)
+        figure = FIGURE
     recorder.log_mechanism(nominal)
     recorder.log_loop(
         nominal, cal_ds.order, model.predict(result.values, cal.commands), cal.measured, cal_after
     )
+    # one candidate far off (a bad fit held out) would flatten every other bar on a linear
+    # scale: each bar is log2 of its held-out RMS over the noise (0: at the noise, 1: twice it)
+    ratio = {n: sc.heldout_rms_mm / diag.noise_floor_rms_mm for n, sc in diag.scores.items()}
     recorder.log_bars(
-        "held-out_RMS", list(diag.scores), [s.heldout_rms_mm for s in diag.scores.values()], "mm"
+        "held-out_RMS_over_noise",
+        list(ratio),
+        [float(np.log2(v)) if v > 0 else float("nan") for v in ratio.values()],
+        "log2 of held-out RMS / noise per coordinate",
     )
     recorder.log_verdict(diag, rms_before * 1e3, rms_after * 1e3, sigma * 1e3)
     summary = {
@@ -125,6 +141,9 @@ def run(
         "diagnosed_effect": diag.chosen,
         "reason": diag.reason,
         "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
+        "figure": figure,
+        "plot_variable": None if diag.plot is None else diag.plot["variable"],
+        "test_3d": errors_3d(test.measured, before_pred, after_pred),
         "residual_structure": diag.structure,
         "effect_parameters": {n: v.tolist() for n, v in diag.coefficients.items()},
         "test": {

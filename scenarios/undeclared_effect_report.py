@@ -17,14 +17,38 @@ def report(s: dict[str, Any]) -> str:
         "",
         f"**Diagnosis: {s['diagnosed_effect']}** — {s['reason']}.",
         "",
-        "| candidate | held-out RMS (mm) |",
-        "|---|---|",
-        *[f"| {n} | {v:.5f} |" for n, v in s["candidates"].items()],
+    ]
+    if s.get("figure"):
+        lines += [
+            f"Each pose's residual (RMS per coordinate) against {s['plot_variable']}, after "
+            "the geometric fit and with the named effect:",
+            "",
+            f"![residual against {s['plot_variable']}]({s['figure']})",
+            "",
+        ]
+    noise = s["noise_floor_rms_mm"]
+    lines += [
+        "Held-out RMS per coordinate of each candidate alone beside the geometry (nested "
+        "cross-validation), and over the noise (the recording's bar chart shows log2 of "
+        "that ratio, so one far-off candidate does not flatten the others):",
+        "",
+        "| candidate | held-out RMS (mm) | / noise |",
+        "|---|---|---|",
+        *[f"| {n} | {v:.5f} | {v / noise:.2f} |" for n, v in s["candidates"].items()],
         "",
         "Structure of the geometric residual (rank correlation of each pose's residual with): "
         + ", ".join(f"{k} {v:+.2f}" for k, v in s.get("residual_structure", {}).items()),
         "",
         f"With the effect added: residual {s['residual_rms_after_mm']:.4f} mm RMS.",
+        "",
+        "Test poses not used to fit, 3D position error per reading (mm):",
+        "",
+        "| model | RMS | mean | max |",
+        "|---|---|---|---|",
+        *[
+            f"| {label} | {v['rms_mm']:.4f} | {v['mean_mm']:.4f} | {v['max_mm']:.4f} |"
+            for label, v in s.get("test_3d", {}).items()
+        ],
         "",
         "Test poses not used to fit (pose predicted from the commands against the measured one):",
         "",

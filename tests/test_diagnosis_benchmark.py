@@ -10,7 +10,13 @@ from pathlib import Path
 import pytest
 
 from scenarios.config import ScenarioError, load_scenario
-from scenarios.diagnosis_benchmark import ACCEPTED, SCALED, is_correct, not_applicable
+from scenarios.diagnosis_benchmark import (
+    ACCEPTED,
+    EFFECT_TYPES,
+    SCALED,
+    is_correct,
+    not_applicable,
+)
 from scenarios.machine_setup import EFFECTS
 from scenarios.runner import run_scenario
 from twin.mechanism import Mechanism
@@ -64,20 +70,79 @@ def test_committed_file_is_a_meaningful_benchmark():
 
     args, skipped = cases(s)
     kinds = {a[3] for a in args}
-    assert len(kinds - {"none"}) >= 6 and "none" in kinds
-    assert sum(a[3] == "none" for a in args) >= 9
+    assert len(kinds - {"none"}) >= 8 and "none" in kinds
+    # three machines, each with effect cases and geometry-only truths; enough of those that
+    # one false alarm in 20 is a rate of 0.05
+    assert {a[2] for a in args} == {"hexapod", "polisher", "arm6r"}
+    for machine in ("hexapod", "polisher", "arm6r"):
+        mine = [a for a in args if a[2] == machine]
+        assert sum(a[3] == "none" for a in mine) >= 7 and len({a[3] for a in mine}) >= 6
+    assert sum(a[3] == "none" for a in args) >= 20
+    arm = {a[3] for a in args if a[2] == "arm6r"}
+    assert {"joint_backlash", "joint_compliance", "thermal_warmup", "actuator_gain"} <= arm
     assert {a[4] for a in args if a[3] != "none"} >= {1.0, 3.0, 10.0}
     assert len(args) >= 60 and not skipped
+    full, skipped_full = cases(load_scenario("diagnosis_benchmark_full"))
+    assert len(full) > 2.5 * len(args) and not skipped_full
+
+
+def _case(kind, named, multiplier=3.0, machine="hexapod", absorbed=False, p=1e-9):
+    return {
+        "machine": machine,
+        "kind": kind,
+        "multiplier": multiplier,
+        "seed": 1,
+        "named": named,
+        "correct": is_correct(kind, named),
+        "first_correct": is_correct(kind, named.split("+")[0]),
+        "absorbed": absorbed,
+        "chi2_p_value": p,
+        "residual_over_noise": 1.0 if absorbed else 3.0,
+        "audit_rms_before_mm": 0.02,
+        "audit_rms_after_mm": 0.01,
+        "runtime_s": 1.0,
+    }
+
+
+def test_absorbed_cases_are_counted_beside_the_rate_not_in_it():
+    from scenarios.diagnosis_benchmark import ABSORBED_P, aggregate
+
+    results = [
+        _case("backlash", "backlash"),
+        _case("lead_error", "none"),  # a real miss: the residual exceeded the noise
+        _case("actuator_gain", "none", machine="polisher", absorbed=True, p=0.4),
+        _case("actuator_gain", "none", multiplier=1.0, absorbed=True, p=0.3),  # weak case
+        _case("none", "none", multiplier=0.0),
+        _case("none", "backlash", multiplier=0.0, machine="polisher"),
+    ]
+    s = aggregate(results)
+    assert ABSORBED_P == 0.01
+    assert s["n_correct_rate_cases"] == 2 and s["correct_rate"] == 0.5
+    assert s["n_absorbed"] == 1 and s["absorbed_cases"][0]["machine"] == "polisher"
+    assert s["correct_rate_with_absorbed"] == pytest.approx(1 / 3)
+    assert s["false_alarm_rate"] == 0.5
+    assert s["false_alarm_rate_by_machine"]["polisher"] == {"n": 1, "false_alarm_rate": 1.0}
+    assert s["correct_rate_by_machine"]["hexapod"] == {"n": 2, "correct_rate": 0.5}
+    assert s["correct_rate_by_machine"]["polisher"] == {"n": 0, "correct_rate": None}
+    assert s["correct_rate_by_multiplier"]["1"] == {"n": 0, "correct_rate": None, "n_absorbed": 1}
+    assert s["heldout_worse_count"] == 0
 
 
 def test_every_twin_effect_has_a_mapping_and_a_scaled_argument():
-    assert set(EFFECTS) <= set(ACCEPTED) and set(EFFECTS) == set(SCALED)
+    assert set(EFFECTS) <= set(ACCEPTED) and set(EFFECTS) <= set(SCALED) <= set(ACCEPTED)
+    assert set(SCALED) == set(EFFECT_TYPES)
     assert is_correct("thermal_warmup", "zero_drift")
+    assert is_correct("thermal_warmup", "thermal_expansion")
+    assert not is_correct("thermal_warmup", "tracker_drift")
     assert not is_correct("thermal_warmup", "thermal_growth+reflector_offsets")
     assert is_correct("none", "none") and not is_correct("none", "backlash")
     hexapod = Mechanism.from_xml(ROOT / "models/hexapod_rrrprr.xml")
     assert not_applicable("joint_backlash", hexapod) is not None  # all prismatic
     assert not_applicable("lead_error_harmonic", hexapod) is None
+    arm = Mechanism.from_xml(ROOT / "models/arm6r_3targets.xml")
+    assert not_applicable("joint_compliance", arm) is None  # its payload loads the arm
+    assert not_applicable("gravity_compliance", arm) is not None  # no masses, no payload
+    assert not_applicable("lead_error_harmonic", arm) is not None  # no screws
 
 
 def test_unknown_kind_is_rejected_at_load(tmp_path):

@@ -45,6 +45,23 @@ def test_summary_contract_and_loop_closed(run):
     before, after = s["test"]["before"], s["test"]["after"]
     for q in ("pos_max_mm", "pos_mean_mm", "ori_max_deg", "ori_mean_deg"):
         assert after[q] < before[q]
+    for q in ("rms_mm", "mean_mm", "max_mm"):  # the 3D position error per reading
+        assert s["test_3d"]["after"][q] < s["test_3d"]["before"][q]
+
+
+@pytest.mark.accuracy
+def test_report_shows_the_residual_against_what_explains_it(run):
+    s, out_dir = run
+    # the first effect named is the screw's: its variable is the command modulo the pitch
+    assert s["figure"] == "diagnosis.png" and "modulo pitch" in s["plot_variable"]
+    png = (out_dir / s["figure"]).read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    report = (out_dir / "report.md").read_text()
+    assert f"]({s['figure']})" in report
+    # the held-out table carries each candidate over the noise (the recording's bars: log2)
+    noise = s["noise_floor_rms_mm"]
+    for name, v in s["candidates"].items():
+        assert f"| {name} | {v:.5f} | {v / noise:.2f} |" in report
 
 
 @pytest.mark.accuracy

@@ -17,6 +17,7 @@ from twin.effects.base import (
     TargetEffect,
     apply_actuator_effects,
 )
+from twin.effects.encoder_eccentricity import EncoderEccentricity
 from twin.effects.gravity_compliance import GravityCompliance
 from twin.effects.joint_backlash import JointBacklash
 from twin.effects.joint_compliance import JointCompliance
@@ -32,6 +33,7 @@ __all__ = [
     "ActuatorGain",
     "Backlash",
     "Effect",
+    "EncoderEccentricity",
     "GeometryEffect",
     "GravityCompliance",
     "JointBacklash",

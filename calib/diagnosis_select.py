@@ -1,0 +1,97 @@
+"""Which effects to name: forward selection judged on held-out poses only.
+
+Every candidate is first evaluated alone beside the geometry (nested cross-validation,
+calib.diagnosis_fit); one that physics forbids (calib.diagnosis_verdict.refusal) is refused.
+Then effects are added one at a time, the best of those that pass, while one passes: it must
+lower the held-out RMS by ``min_gain`` in every fold scheme with a one-sided Wilcoxon
+p < ``alpha`` on the per-pose improvement, lower the user's test-set error when there is one,
+and (in a combination) stay physical. A candidate that does not help alone is not tried in a
+combination.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from calib.diagnosis_candidates import Candidate
+from calib.diagnosis_context import Context
+from calib.diagnosis_fit import SCHEMES, Evaluation, Problem, evaluate
+from calib.diagnosis_verdict import improvement, refusal
+
+# (evaluation, its candidates) -> RMS of the test set's 3D errors (m), None without a test set
+TestRms = Callable[[Evaluation, list[Candidate]], float | None]
+
+
+@dataclass
+class Selection:
+    base: Evaluation  # geometry only
+    singles: dict[str, Evaluation]  # each candidate alone
+    refused: dict[str, str]  # candidate -> why physics forbids its fit
+    chosen: list[Candidate] = field(default_factory=list)
+    current: Evaluation | None = None  # geometry + the chosen effects
+    why_not: dict[str, str] = field(default_factory=dict)  # alone, why it did not pass
+
+
+def select_effects(
+    prob: Problem,
+    ctx: Context,
+    fold_sets: dict,
+    cands: list[Candidate],
+    n_rows: int,
+    alpha: float,
+    min_gain: float,
+    max_effects: int,
+    test_rms: TestRms,
+) -> Selection:
+    base = evaluate(prob, ctx, fold_sets, [], None, n_rows)
+    singles, refused = {}, {}
+    for c in cands:
+        ev = evaluate(prob, ctx, fold_sets, [c], None, n_rows)
+        singles[c.name] = ev
+        why = refusal(prob, ctx, [c], ev)
+        if why:
+            refused[c.name] = why
+    helps = {
+        k: all(v.heldout_rms_mm(s) < base.heldout_rms_mm(s) for s in SCHEMES)
+        for k, v in singles.items()
+    }
+
+    def passes(cur: Evaluation, cur_c: list[Candidate], new: Evaluation, new_c: list[Candidate]):
+        for s in SCHEMES:
+            gain, pv = improvement(cur.heldout[s], new.heldout[s])
+            if gain < min_gain or pv >= alpha:
+                return False, f"{s} folds: held-out RMS {1 - gain:.3g} x, Wilcoxon p = {pv:.2g}"
+        before, after = test_rms(cur, cur_c), test_rms(new, new_c)
+        if before is not None and not after < before:
+            return False, f"the test set's error rises ({before:.4g} -> {after:.4g})"
+        return True, ""
+
+    sel = Selection(base, singles, refused, current=base)
+    while len(sel.chosen) < max_effects:
+        trials = []
+        for c in cands:
+            if c in sel.chosen or c.name in refused:
+                continue
+            if sel.chosen and not helps[c.name]:  # no help alone: not tried in a combination
+                continue
+            new_c = [*sel.chosen, c]
+            ev = (
+                singles[c.name]
+                if not sel.chosen
+                else evaluate(prob, ctx, fold_sets, new_c, sel.current, n_rows)
+            )
+            ok, why = passes(sel.current, sel.chosen, ev, new_c)
+            if ok and sel.chosen:
+                bad = refusal(prob, ctx, new_c, ev)
+                ok, why = (False, f"refused: {bad}") if bad else (True, "")
+            if ok:
+                trials.append((ev.heldout_rms_mm(), c, ev))
+            elif not sel.chosen:
+                sel.why_not[c.name] = why
+        if not trials:
+            break
+        _, best, ev = min(trials, key=lambda t: t[0])
+        sel.chosen.append(best)
+        sel.current = ev
+    return sel
