@@ -469,7 +469,18 @@ SCHEMAS: dict[str, Table] = {
             required=True,
         ),
         scoring=Table({"nodes_per_side": Key(int, min=1)}),
-        monte_carlo=Table({"runs": Key(int, required=True, min=2)}, required=True),
+        # the single scenario needs it; the draw study (with [draws]) does without
+        monte_carlo=Table({"runs": Key(int, required=True, min=2)}),
+        # the draw study: the whole scenario over n truth draws (seeds seed, seed + 1, ...)
+        draws=Table(
+            {
+                "n": Key(int, required=True, min=1),
+                "estimators": Key(list, min_items=1, check=_check_estimators),
+                "engine": Key(str, choices=("ray", "local")),
+            }
+        ),
+        # the loop after the fine calibration (diagnosis, effect, refit, compensation)
+        loop=Table({"estimator": Key(str)}),
     ),
     "optimal_poses": _base(
         seed=_SEED,

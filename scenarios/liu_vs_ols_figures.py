@@ -1,4 +1,10 @@
-"""Error maps of the liu_vs_ols scenario, one PNG per layer and quantity (like Figs. 6-9)."""
+"""Error maps of the liu_vs_ols scenario (like Figs. 6-9): one PNG per quantity.
+
+Rows are the three layers (upper, middle = test, lower), columns the stages (uncalibrated,
+coarse, the fine estimators shown, the loop); the nodes of a layer form a grid, drawn as
+image cells. Each panel has its own colour scale (the uncalibrated 15 mm would leave every
+calibrated map uniformly dark), from 0 to its max, which its title states with the mean.
+"""
 
 from __future__ import annotations
 
@@ -9,63 +15,69 @@ import numpy as np
 
 from scenarios.figures import plt, save_png
 
+SHOWN = ("uncalibrated", "coarse", "ols", "liu", "liu_paper_deg", "loop")
 
-def _panel_map(
-    path: Path, title: str, panels: list[tuple[str, np.ndarray, np.ndarray]], label: str
-) -> None:
-    vmax = max(float(np.max(v)) for _, _, v in panels)
+
+def _grid(xy: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, list[float]]:
+    xs, ys = np.unique(np.round(xy[:, 0], 9)), np.unique(np.round(xy[:, 1], 9))
+    img = np.full((len(ys), len(xs)), np.nan)
+    ix = np.searchsorted(xs, np.round(xy[:, 0], 9))
+    iy = np.searchsorted(ys, np.round(xy[:, 1], 9))
+    img[iy, ix] = values
+    dx = (xs[1] - xs[0]) / 2 if len(xs) > 1 else 1.0
+    dy = (ys[1] - ys[0]) / 2 if len(ys) > 1 else 1.0
+    return img, [xs[0] - dx, xs[-1] + dx, ys[0] - dy, ys[-1] + dy]
+
+
+def _layers(maps: dict[str, dict[str, Any]]) -> list[tuple[str, float]]:
+    out = []
+    for group in ("calibration", "test"):
+        if group in maps:
+            poses = next(iter(maps[group].values()))[0]
+            out += [(group, float(z)) for z in np.unique(np.round(poses[:, 2], 9))[::-1]]
+    return sorted(out, key=lambda gz: -gz[1])
+
+
+def _figure(path: Path, maps: dict[str, dict[str, Any]], qty: str) -> None:
+    rows = _layers(maps)
+    stages = [s for s in SHOWN if all(s in maps[g] for g, _ in rows)]
     fig, axes = plt.subplots(
-        1,
-        len(panels),
-        figsize=(3.2 * len(panels) + 1.2, 3.6),
+        len(rows),
+        len(stages),
+        figsize=(2.3 * len(stages), 2.2 * len(rows) + 0.4),
         squeeze=False,
-        constrained_layout=True,
     )
-    for ax, (name, xy, values) in zip(axes[0], panels, strict=True):
-        sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, cmap="viridis", vmin=0, vmax=vmax, s=60)
-        k = int(np.argmax(values))
-        ax.annotate(
-            f"max {values[k]:.3f}", xy[k], textcoords="offset points", xytext=(4, 4), fontsize=7
-        )
-        ax.set_title(f"{name}\nmax {values.max():.3f}, mean {values.mean():.3f}", fontsize=9)
-        ax.set_xlabel("x (mm)")
-        ax.set_ylabel("y (mm)")
-        ax.set_aspect("equal")
-    fig.colorbar(sc, ax=axes[0].tolist(), label=label, shrink=0.85)
-    fig.suptitle(title, fontsize=10)
+    fig.subplots_adjust(left=0.04, right=0.99, bottom=0.05, top=0.88, wspace=0.3, hspace=0.55)
+    unit = "mm" if qty == "position" else "deg"
+    for r, (group, z) in enumerate(rows):
+        for c, stage in enumerate(stages):
+            poses, errs = maps[group][stage]
+            sel = np.isclose(poses[:, 2], z)
+            values = errs.position[sel] * 1e3 if qty == "position" else errs.orientation[sel]
+            if qty != "position":
+                values = np.degrees(values)
+            img, extent = _grid(poses[sel, :2] * 1e3, values)
+            ax = axes[r, c]
+            ax.imshow(img, origin="lower", extent=extent, cmap="viridis", vmin=0)
+            ax.set_title(
+                f"{stage}, z {z * 1e3:+.0f} mm ({group})\n"
+                f"max {values.max():.3f}, mean {values.mean():.3f} {unit}",
+                fontsize=7,
+            )
+            ax.tick_params(labelsize=6)
+    fig.suptitle(
+        f"polisher: {qty} error of the head at every node ({unit}); each panel scaled from 0 "
+        "(dark) to its own max (yellow)",
+        fontsize=9,
+    )
     save_png(fig, path)
 
 
 def write_figures(out_dir: Path, maps: dict[str, dict[str, Any]]) -> dict[str, str]:
-    """maps[group][stage] = (poses (N, 6), PoseErrors); one PNG per layer height and quantity."""
+    """maps[group][stage] = (poses (N, 6), PoseErrors); one PNG per quantity."""
     written: dict[str, str] = {}
-    for group, stages in maps.items():
-        first_poses = next(iter(stages.values()))[0]
-        for z in np.unique(np.round(first_poses[:, 2], 9)):
-            panels_pos, panels_ori = [], []
-            for stage, (poses, errs) in stages.items():
-                sel = np.isclose(poses[:, 2], z)
-                xy = poses[sel, :2] * 1e3
-                panels_pos.append((stage, xy, errs.position[sel] * 1e3))
-                panels_ori.append((stage, xy, np.degrees(errs.orientation[sel])))
-            tag = f"{group}_z{z * 1e3:+.0f}mm"
-            for qty, panels, label in (
-                ("position", panels_pos, "position error (mm)"),
-                ("orientation", panels_ori, "orientation error (deg)"),
-            ):
-                # the coarse stage on its own scale, the fine stages on one shared scale
-                for part, chosen in (
-                    ("coarse", [p for p in panels if p[0] == "coarse"]),
-                    ("fine", [p for p in panels if p[0] != "coarse"]),
-                ):
-                    if not chosen:
-                        continue
-                    name = f"error_map_{tag}_{qty}_{part}.png"
-                    _panel_map(
-                        out_dir / name,
-                        f"{group} layer z = {z * 1e3:+.0f} mm: {qty} after {part} calibration",
-                        chosen,
-                        label,
-                    )
-                    written[f"{tag}_{qty}_{part}"] = name
+    for qty in ("position", "orientation"):
+        name = f"error_maps_{qty}.png"
+        _figure(out_dir / name, maps, qty)
+        written[f"error_maps_{qty}"] = name
     return written

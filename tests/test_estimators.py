@@ -85,7 +85,10 @@ def test_ols_equals_lstsq_on_the_unscaled_problem():
     h, x, rng = calibration_like()
     y = h @ x + 1e-3 * rng.normal(size=h.shape[0])
     est = OLS().fit(h, y)
-    np.testing.assert_allclose(est.x, np.linalg.lstsq(h, y, rcond=None)[0], rtol=1e-10)
+    ref = np.linalg.lstsq(h, y, rcond=None)[0]
+    # Two factorisations agree to rounding scaled by the condition number, whatever BLAS kernel
+    # or thread count ran them; compare in norm, not element by element.
+    assert np.linalg.norm(est.x - ref) <= 1e-9 * np.linalg.norm(ref)
     np.testing.assert_allclose(est.linear_map @ y, est.x, rtol=1e-12)
 
 
@@ -348,10 +351,10 @@ def test_liu_covariance_never_exceeds_ols_for_a_fixed_d(d):
 
 
 def test_registry_names_the_estimators():
-    assert sorted(ESTIMATORS) == ["liu", "liu_paper", "ols", "pcr", "ridge"]
+    assert sorted(ESTIMATORS) == ["liu", "liu_cv", "liu_paper", "ols", "pcr", "ridge"]
     assert isinstance(make_estimator("liu", k=1.0), Liu)
     with pytest.raises(
-        ValueError, match=r"unknown estimator 'lasso'.*'liu', 'liu_paper', 'ols', 'pcr'"
+        ValueError, match=r"unknown estimator 'lasso'.*'liu', 'liu_cv', 'liu_paper', 'ols', 'pcr'"
     ):
         make_estimator("lasso")
     with pytest.raises(ValueError, match=r"bad options.*'ols'"):

@@ -23,6 +23,7 @@ from twin.exceptions import WorkspaceError
 HEX = "hexapod_paper.toml"
 UND = "undeclared_effect.toml"
 LIU = "liu_vs_ols.toml"
+LIU_GEO = "liu_vs_ols_geometry.toml"
 POL = "polisher_identifiability.toml"
 OPT = "optimal_poses.toml"
 TRUTH = SCENARIO_DIR / "truth" / "hexapod_table2.toml"
@@ -109,7 +110,7 @@ BAD = [
     ("bad estimator option value", LIU, "k = 1.0 }", "k = -1.0 }",
      ["'fine.estimators[2]'", "Liu k must be"]),
     ("one Monte Carlo run", LIU, "runs = 10000", "runs = 1", ["'monte_carlo.runs' must be >= 2"]),
-    ("negative random truth", LIU, "translation_mm = 1.0", "translation_mm = -1.0",
+    ("negative random truth", LIU_GEO, "translation_mm = 1.0", "translation_mm = -1.0",
      ["'truth.random.translation_mm' must be >= 0"]),
     ("typo in an array of tables", POL, "nodes_per_side = 5 },", "node_per_side = 5 },",
      ["unknown key 'plan_comparison.plans[1].node_per_side'",

@@ -1,4 +1,4 @@
-"""Estimators by name, for scenario files: "ols", "liu", "liu_paper", "ridge", "pcr"."""
+"""Estimators by name, for scenario files: "ols", "liu", "liu_paper", "liu_cv", "ridge", "pcr"."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from typing import Any
 
 from calib.estimators.linear import Estimator
 from calib.estimators.liu import Liu
+from calib.estimators.liu_cv import LiuCV
 from calib.estimators.liu_paper_units import LiuPaperUnits
 from calib.estimators.ols import OLS
 from calib.estimators.pcr import PCR
@@ -16,6 +17,7 @@ ESTIMATORS: dict[str, Callable[..., Estimator]] = {
     "ols": OLS,
     "liu": Liu,
     "liu_paper": LiuPaperUnits,  # needs is_angle (calib.fine passes it)
+    "liu_cv": LiuCV,  # k and d by cross-validation over the calibration poses
     "ridge": Ridge,
     "pcr": PCR,
 }

@@ -1,0 +1,269 @@
+"""The liu_vs_ols pipeline in steps, shared by the single scenario and the draw study.
+
+The machine (truth twin with its effects, the tracker, the measurement sequence) is a
+:class:`Bench`; the calibration side sees only ``bench.measure`` (commands in, readings out)
+and the nominal model. Scoring uses ``bench.true_targets`` (where the targets really are).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calib.coarse import CoarseResult, coarse_calibration
+from calib.estimators.linear import LinearEstimate
+from calib.fine import FineProblem, estimate, fine_problem
+from calib.model import CalibrationModel
+from calib.scoring import PoseErrors, max_mean_stats, pose_errors
+from scenarios.config import Scenario
+from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
+from twin.kinematics import inverse
+from twin.kinematics_batch import forward_batch
+from twin.measurement import measure as twin_measure
+from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
+from twin.sensitivity import tool_twist_jacobian
+from twin.tracker import Tracker, TrackerNoise
+from twin.workspace import commands_for_poses, layer_poses
+
+# First paper, Table 5 (experiment, "pose errors after calibration in three measurement
+# layers") and section 5 (simulation).
+PAPER: dict[str, Any] = {
+    "table5": {
+        "coarse": {
+            "pos_max_mm": 0.166,
+            "pos_mean_mm": 0.083,
+            "ori_max_deg": 0.206,
+            "ori_mean_deg": 0.073,
+        },
+        "ols": {
+            "pos_max_mm": 0.092,
+            "pos_mean_mm": 0.035,
+            "ori_max_deg": 0.091,
+            "ori_mean_deg": 0.046,
+        },
+        "liu": {
+            "pos_max_mm": 0.056,
+            "pos_mean_mm": 0.030,
+            "ori_max_deg": 0.051,
+            "ori_mean_deg": 0.037,
+        },
+    },
+    "eta_percent": 63.9,
+    "n_source_errors": 145,
+    "n_identifiable": 54,
+}
+
+
+@dataclass
+class Bench:
+    """The truth twin as the calibration meets it: commands in, tracker readings out."""
+
+    scenario: Scenario
+    rng: np.random.Generator
+    machine: ScenarioMachine
+    model: CalibrationModel
+    encoder: np.ndarray
+    sigma_m: float
+    tracker: Tracker
+    effects: list
+    half: tuple[float, float]
+    z_layers: dict[str, float]
+    clock: list[int] = field(default_factory=lambda: [0])  # poses measured so far
+
+    def run_machine(self, commands: np.ndarray):
+        """The truth twin with its effects, at the next poses of the measurement sequence."""
+        order = self.clock[0] + np.arange(len(commands))
+        self.clock[0] += len(commands)
+        return twin_measure(
+            self.machine.truth, commands, self.tracker, self.rng, effects=self.effects, order=order
+        )
+
+    def measure(self, commands: np.ndarray) -> np.ndarray:
+        """Tracker readings (N, T, 3) of the targets, averaged over the repeats."""
+        if not self.effects:  # geometry only: the twin's direct path
+            self.clock[0] += len(commands)
+            return self.tracker.measure_averaged(
+                forward_batch(self.machine.truth, commands).targets, self.rng
+            )
+        return self.run_machine(commands).readings.mean(axis=2)
+
+    def true_targets(self, commands: np.ndarray) -> np.ndarray:
+        """Where the targets really are (no tracker noise), for scoring."""
+        if not self.effects:
+            self.clock[0] += len(commands)
+            return forward_batch(self.machine.truth, commands).targets
+        return self.run_machine(commands).true_targets
+
+    def poses(self, group: str, nodes: int) -> np.ndarray:
+        heights = {
+            "calibration": [self.z_layers["upper"], self.z_layers["lower"]],
+            "test": [self.z_layers["middle"]],
+            "fine": [self.z_layers["upper"], self.z_layers["lower"]],
+            "coarse": [self.z_layers["middle"]],
+        }[group]
+        return layer_poses(self.machine.nominal, heights, nodes, self.half)
+
+
+def make_bench(scenario: Scenario, rng: np.random.Generator | None = None) -> Bench:
+    rng = np.random.default_rng(scenario.get("seed", int)) if rng is None else rng
+    machine = load_machine(scenario, rng)
+    params = machine.params
+    sigma = scenario.get("tracker.sigma_mm", float) * 1e-3
+    tracker = Tracker(
+        position_m=tuple(v * 1e-3 for v in scenario.get("tracker.position_mm", list)),
+        noise=TrackerNoise("gaussian", sigma, 0.0),
+        repeats=scenario.get("tracker.repeats", int, 1),
+    )
+    return Bench(
+        scenario=scenario,
+        rng=rng,
+        machine=machine,
+        model=machine.calibration_model(),
+        encoder=np.array([n.endswith(".encoder") for n in params.names]),
+        sigma_m=sigma,
+        tracker=tracker,
+        effects=build_effects(scenario),
+        half=tuple(v * 1e-3 for v in scenario.get("workspace.half_width_mm", list)),
+        z_layers={k: v * 1e-3 for k, v in scenario.section("layers").items()},
+    )
+
+
+@dataclass(frozen=True)
+class Calibration:
+    coarse: CoarseResult
+    fine_poses: np.ndarray
+    fine_order: np.ndarray  # measurement order of the fine plan's poses
+    fine_commands: np.ndarray  # (N, A) at the coarse settings
+    fine_measured: np.ndarray  # (N, T, 3) readings
+    problem: FineProblem
+    estimates: dict[str, tuple[LinearEstimate, np.ndarray]]
+
+
+def estimator_label(entry: str | dict[str, Any]) -> str:
+    return entry if isinstance(entry, str) else entry["label"]
+
+
+def run_estimators(problem: FineProblem, entries: list) -> dict[str, tuple[LinearEstimate, Any]]:
+    """Each entry: "ols", or a table {label = "liu_k1", method = "liu", k = 1.0}."""
+    out = {}
+    for entry in entries:
+        if isinstance(entry, str):
+            out[entry] = estimate(problem, entry)
+        else:
+            opts = {k: v for k, v in entry.items() if k not in ("label", "method")}
+            out[entry["label"]] = estimate(problem, entry["method"], **opts)
+    return out
+
+
+def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
+    """Coarse (middle layer, Eq. 15) then fine (upper and lower layers, every estimator)."""
+    sc = bench.scenario
+    coarse_nodes = sc.get("coarse.nodes_per_side", int)
+    fine_nodes = sc.get("fine.nodes_per_side", int)
+    if progress is not None:
+        progress.step(f"coarse calibration: middle layer, {coarse_nodes} x {coarse_nodes} nodes")
+    coarse = coarse_calibration(
+        bench.model,
+        bench.encoder,
+        bench.poses("coarse", coarse_nodes),
+        bench.measure,
+        rel_tol=sc.get("coarse.rel_tol", float, 0.05),
+    )
+    if progress is not None:
+        progress.note(
+            f"{coarse.iterations} rounds, relative changes "
+            + ", ".join(f"{c:.3g}" for c in coarse.relative_changes)
+        )
+        progress.step(
+            f"fine calibration: upper and lower layers, {fine_nodes} x {fine_nodes} nodes"
+        )
+    fine_poses = bench.poses("fine", fine_nodes)
+    order = bench.clock[0] + np.arange(len(fine_poses))
+    seen: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def measure(commands: np.ndarray) -> np.ndarray:
+        readings = bench.measure(commands)
+        seen.append((np.array(commands), readings))
+        return readings
+
+    problem = fine_problem(bench.model, coarse.values, bench.encoder, fine_poses, measure)
+    ((cmds, readings),) = seen
+    return Calibration(
+        coarse, fine_poses, order, cmds, readings, problem, run_estimators(problem, entries)
+    )
+
+
+def twist_compensated_many(
+    model: CalibrationModel,
+    base_values: np.ndarray,
+    deltas: dict[str, np.ndarray],
+    columns: np.ndarray,
+    poses: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """Eq. (16) for several estimates at once: :func:`calib.compensation.
+    twist_compensated_commands` with the inverse kinematics of each nominal pose and its B
+    computed once and shared by every estimate (the same numbers, less work)."""
+    mech = model.mechanism(base_values)
+    out = {m: np.empty((len(poses), mech.n_actuators)) for m in deltas}
+    q = None
+    for i, pose in enumerate(np.atleast_2d(poses)):
+        sol = inverse(mech, pose, start=q)
+        b = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)[:, columns]
+        for m, delta in deltas.items():
+            twist = b @ delta
+            r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
+            corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
+            out[m][i] = inverse(mech, corrected, start=sol.qpos).actuators
+        q = sol.qpos
+    return out
+
+
+def stage_commands(
+    bench: Bench, cal: Calibration, poses: np.ndarray, stages: list[str] | None = None
+) -> dict[str, np.ndarray]:
+    """Commands of every stage for ``poses``: uncalibrated, coarse, each estimator (Eq. 16)."""
+    nominal = bench.machine.nominal
+    out = {
+        "uncalibrated": commands_for_poses(nominal, poses),  # before any calibration
+        "coarse": commands_for_poses(bench.model.mechanism(cal.coarse.values), poses),
+    }
+    deltas = {m: est.x for m, (est, _) in cal.estimates.items() if stages is None or m in stages}
+    out.update(
+        twist_compensated_many(bench.model, cal.coarse.values, deltas, cal.problem.columns, poses)
+    )
+    return out
+
+
+def score(
+    bench: Bench, poses: dict[str, np.ndarray], cmds: dict[str, dict[str, np.ndarray]]
+) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, dict[str, Any]]]:
+    """Re-measure every stage's commands on the truth: stats per group, and the error maps.
+
+    ``poses[group]`` and ``cmds[group][stage]`` for the groups "calibration" and "test"; the
+    group "all" is the union of both (the paper's three layers), not measured again."""
+    layers: dict[str, dict[str, dict[str, float]]] = {}
+    maps: dict[str, dict[str, tuple[np.ndarray, PoseErrors]]] = {}
+    local = bench.machine.nominal.target_local()
+    for group, stage_cmds in cmds.items():
+        layers[group], maps[group] = {}, {}
+        for stage, c in stage_cmds.items():
+            if callable(c):  # commands that depend on when they are run: c(order)
+                c = c(bench.clock[0] + np.arange(len(poses[group])))
+            errs = pose_errors(poses[group], bench.true_targets(c), local)
+            layers[group][stage] = max_mean_stats(errs)
+            maps[group][stage] = (poses[group], errs)
+    if "calibration" in maps and "test" in maps:
+        layers["all"] = {}
+        for stage in maps["test"]:
+            if stage not in maps["calibration"]:
+                continue
+            a, b = maps["calibration"][stage][1], maps["test"][stage][1]
+            both = PoseErrors(
+                np.concatenate([a.position, b.position]),
+                np.concatenate([a.orientation, b.orientation]),
+                np.vstack([a.position_vectors, b.position_vectors]),
+            )
+            layers["all"][stage] = max_mean_stats(both)
+    return layers, maps
