@@ -4,7 +4,8 @@ a finite-difference Jacobian, each on a fresh CalibrationModel, best of N, answe
 The baseline is what a user would write first: ``least_squares(method="lm", jac="2-point",
 x_scale="jac")`` over the same free (identifiable) parameters, from the same start (zero),
 with tolerances as tight as ours (our LM stops on a step below 1e-12 SI or a relative cost
-decrease below 1e-14).
+decrease below 1e-14). Both run with BLAS on one thread (ours pins it inside calib.identify,
+the baseline here), so neither pays for thread hand-offs on small matrices.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from scipy.optimize import least_squares
 from bench.machines import BenchMachine
 from calib.identify import identify
 from calib.model import CalibrationModel
+from twin.kinematics_fast import one_blas_thread
 
 SCIPY_OPTIONS = {"method": "lm", "jac": "2-point", "x_scale": "jac", "ftol": 1e-14, "xtol": 1e-12}
 
@@ -43,7 +45,8 @@ def _scipy(m: BenchMachine, free: np.ndarray, repeat: int, budget_s: float):
             return (m.obs.measured - model.predict(x, m.obs.commands).targets).reshape(-1)
 
         t0 = time.perf_counter()
-        sol = least_squares(resid, np.zeros(len(free)), **SCIPY_OPTIONS)
+        with one_blas_thread():
+            sol = least_squares(resid, np.zeros(len(free)), **SCIPY_OPTIONS)
         best = min(best, time.perf_counter() - t0)
         runs += 1
         if best * (runs + 1) > budget_s:  # another run would exceed the budget

@@ -1,6 +1,7 @@
 """Wall time of every scenario (scenarios/*.toml) run whole through scenarios.runner into a
-temporary results root, never results/. optimal_poses and diagnosis_benchmark only with
-BENCH_ALL=1 (minutes each).
+temporary results root, never results/. The slow studies (optimal_poses, every
+diagnosis_benchmark*, the 100-draw liu_vs_ols_draws; minutes to tens of minutes each) only
+with BENCH_ALL=1.
 
 liu_vs_ols is also timed without figures and recording: the scenario has no switch for it, so
 the benchmark stubs its figure writers (scenarios.liu_vs_ols_figures.write_figures and the
@@ -18,12 +19,16 @@ from unittest import mock
 from scenarios.config import REPO_ROOT
 from scenarios.runner import run_scenario
 
-SLOW = ("optimal_poses", "diagnosis_benchmark")  # minutes each
+SLOW = ("optimal_poses", "diagnosis_benchmark", "liu_vs_ols_draws")  # name prefixes
+
+
+def is_slow(name: str) -> bool:
+    return name.startswith(SLOW)
 
 
 def scenario_names(everything: bool) -> list[str]:
     names = sorted(p.stem for p in (REPO_ROOT / "scenarios").glob("*.toml"))
-    return [n for n in names if everything or n not in SLOW]
+    return [n for n in names if everything or not is_slow(n)]
 
 
 def _timed(name: str, root: Path, **kwargs) -> float:

@@ -8,6 +8,8 @@ twin in a scenario) to score it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from calib.model import CalibrationModel
@@ -43,6 +45,51 @@ def reachable_compensated_commands(
     return out, ok
 
 
+@dataclass(frozen=True)
+class TwistCompensation:
+    """The estimate-independent part of the first paper's Eq. (16) for a set of poses.
+
+    Each commanded pose's inverse kinematics on the controller's model (nominal geometry with
+    the coarse encoder settings ``base_values``) and its tool twist Jacobian ``B`` are computed
+    once by :meth:`prepare`; :meth:`commands` then corrects the poses for any number of
+    estimates ``delta`` (one inverse kinematics per pose each, started from the first)."""
+
+    model: CalibrationModel
+    base_values: np.ndarray
+    poses: np.ndarray  # (N, 6)
+    qpos: np.ndarray  # (N, nq) the first inverse kinematics of each pose
+    twist_jacobians: np.ndarray  # (N, 6, n) d(tool twist)/d(every parameter)
+
+    @classmethod
+    def prepare(
+        cls, model: CalibrationModel, base_values: np.ndarray, poses: np.ndarray
+    ) -> TwistCompensation:
+        base_values = np.array(base_values, dtype=float)
+        poses = np.atleast_2d(np.asarray(poses, dtype=float))
+        mech = model.mechanism(base_values)
+        qpos = np.empty((len(poses), mech.model.nq))
+        jac = np.empty((len(poses), 6, model.n_parameters))
+        q = None
+        for i, pose in enumerate(poses):
+            sol = inverse(mech, pose, start=q)
+            qpos[i] = sol.qpos
+            jac[i] = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)
+            q = sol.qpos
+        return cls(model, base_values, poses, qpos, jac)
+
+    def commands(self, delta: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """Commands (N, A) for the poses corrected by the predicted twist ``B[:, columns]
+        delta`` of the estimate ``delta`` (SI, one value per column)."""
+        mech = self.model.mechanism(self.base_values)
+        twists = self.twist_jacobians[:, :, np.asarray(columns)] @ np.asarray(delta, dtype=float)
+        out = np.empty((len(self.poses), mech.n_actuators))
+        for i, (pose, twist) in enumerate(zip(self.poses, twists, strict=True)):
+            r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
+            corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
+            out[i] = inverse(mech, corrected, start=self.qpos[i]).actuators
+        return out
+
+
 def twist_compensated_commands(
     model: CalibrationModel,
     base_values: np.ndarray,
@@ -52,17 +99,6 @@ def twist_compensated_commands(
 ) -> np.ndarray:
     """The first paper's Eq. (16): each commanded pose is corrected by the predicted pose
     error twist ``B delta`` and turned into commands by the controller's inverse kinematics
-    (nominal geometry with the coarse encoder settings ``base_values``)."""
-    mech = model.mechanism(base_values)
-    out = np.empty((len(poses), mech.n_actuators))
-    q = None
-    for i, pose in enumerate(np.atleast_2d(poses)):
-        sol = inverse(mech, pose, start=q)
-        b = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)[:, columns]
-        twist = b @ delta
-        r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
-        corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
-        fixed = inverse(mech, corrected, start=sol.qpos)
-        out[i] = fixed.actuators
-        q = sol.qpos
-    return out
+    (nominal geometry with the coarse encoder settings ``base_values``). For several
+    estimates on the same poses, :class:`TwistCompensation` does the common work once."""
+    return TwistCompensation.prepare(model, base_values, poses).commands(delta, columns)

@@ -83,7 +83,7 @@ def pivoted_qr_order(a: np.ndarray, rank: int) -> list[int]:
     remaining = list(range(n))
     chosen: list[int] = []
     for k in range(min(rank, m)):
-        norms = np.array([np.linalg.norm(r[k:, j]) for j in remaining])
+        norms = np.linalg.norm(r[k:, remaining], axis=0)
         top = norms.max()
         best = next(j for j, v in zip(remaining, norms, strict=True) if v >= top * (1 - TIE))
         chosen.append(best)

@@ -41,8 +41,10 @@ from calib.robust import (
     rejections,
     robust_fit,
     robust_scale,
+    suspect_outliers,
 )
 from twin.exceptions import ClosureError
+from twin.kinematics_fast import one_blas_thread
 from twin.mechanism import Mechanism
 from twin.workspace import check_command_strokes
 
@@ -143,12 +145,9 @@ class IdentificationResult:
 
 
 def _one_blas_thread() -> contextlib.AbstractContextManager:
-    """Numpy's BLAS on one thread: the products here are small, threads only cost."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # not installed: run as numpy is configured
-        return contextlib.nullcontext()
-    return threadpool_limits(1)
+    """Numpy's BLAS on one thread: the products here are small, threads only cost
+    (twin.kinematics_fast.one_blas_thread; the library scan is done once per process)."""
+    return one_blas_thread()
 
 
 def identify(
@@ -176,15 +175,27 @@ def identify(
         return _identify(model, obs, x0, unidentifiable, options, robust, robust_options, prior)
 
 
+def _analysed(jac: np.ndarray, names: tuple[str, ...]) -> IdentifiabilityReport:
+    """:func:`calib.identifiability.analyse` of a tall Jacobian through its QR factor ``R``:
+    ``J = Q R`` with orthonormal ``Q`` keeps every column norm, singular value, pivoted-QR
+    choice and least-squares coefficient, in n rows instead of m (a 2304 x 54 hexapod
+    Jacobian: 54 rows, a tenth of the identification's time saved). The report still counts
+    the m equations."""
+    m, n = jac.shape
+    if m <= 2 * n:
+        return analyse(jac, names)
+    return replace(analyse(np.linalg.qr(jac, mode="r"), names), n_rows=m)
+
+
 def _analyse(
     jac0: np.ndarray, names: tuple[str, ...], reg_jac: np.ndarray | None
 ) -> tuple[IdentifiabilityReport, tuple[str, ...]]:
     """Identifiability of the kinematic parameters beside the registration (if any); and
     which of them the registration makes redundant."""
     if reg_jac is None:
-        return analyse(jac0, names), ()
-    alone = analyse(jac0, names)
-    report = analyse(project_out(jac0, reg_jac), names)
+        return _analysed(jac0, names), ()
+    alone = _analysed(jac0, names)
+    report = _analysed(project_out(jac0, reg_jac), names)
     redundant = tuple(n for n in names if n in alone.identifiable and n not in report.identifiable)
     why = dict(report.unidentifiable)
     for n in redundant:
@@ -259,8 +270,8 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     scale = robust_scale(norms, n_unknown)
     rejected: tuple[Rejection, ...] = ()
     n_kept = n_readings
-    if robust:
-        opt = robust_options or RobustOptions()
+    opt = robust_options or RobustOptions()
+    if robust and suspect_outliers(res.residual, res.jacobian, n_readings, n_unknown, opt):
         rob = robust_fit(residual, jacobian, res.x, n_unknown, opt, n_readings)
         iterations += rob.iterations
         norms = np.linalg.norm(rob.residual[: 3 * n_readings].reshape(-1, 3), axis=1)

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from calib.exceptions import CalibError
 from twin.parameters import left_jacobian_so3
@@ -113,6 +112,8 @@ def initial_registration(
             "the measured points lie on a line: the rotation about it, and so the tracker's "
             "frame, cannot be found (measure poses that span a volume)"
         )
+    from scipy.spatial.transform import Rotation  # lazy: scipy.spatial costs 0.5 s at import
+
     rot, _ = Rotation.align_vectors(pc, mc)
     r = rot.as_matrix()
     return Registration(r, p.mean(axis=0) - m.mean(axis=0) @ r.T)

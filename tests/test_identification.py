@@ -252,3 +252,19 @@ def test_bind_dataset_rejects_missing_and_unknown_names(hexapod):
         bind_dataset(hexapod, _dataset(actuators=(*LEGS, "leg7")))
     with pytest.raises(DatasetError, match=r"missing targets \['target_3'\]"):
         bind_dataset(hexapod, _dataset(targets=TARGETS[:2]))
+
+
+def test_stopping_on_the_predicted_decrease_changes_nothing(hexapod, hexapod_params, table2_values):
+    """The Gauss-Newton stop (LMOptions.predicted_rtol) ends where the rejected trial steps
+    it saves would have ended: the same estimate as without it, in fewer iterations."""
+    from calib.estimators.levenberg_marquardt import LMOptions
+
+    obs = _readings(hexapod, hexapod_params, table2_values, 40, 8)
+    rng = np.random.default_rng(8)
+    noisy = Observations(obs.commands, obs.measured + rng.normal(0.0, 5e-6, obs.measured.shape))
+    model = CalibrationModel(hexapod, hexapod_params)
+    fast = identify(model, noisy, robust=False)
+    slow = identify(model, noisy, robust=False, options=LMOptions(predicted_rtol=0.0))
+    assert fast.converged and slow.converged
+    np.testing.assert_allclose(fast.values, slow.values, rtol=0, atol=1e-9)
+    assert fast.iterations <= slow.iterations

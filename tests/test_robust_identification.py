@@ -16,8 +16,9 @@ import pytest
 from calib.diagnosis import default_candidates, diagnose
 from calib.estimators.levenberg_marquardt import reweighted_levenberg_marquardt
 from calib.exceptions import CalibError, TooManyOutliersError
-from calib.identify import Observations, Rejection, identify, robust_scale
+from calib.identify import Observations, Rejection, RobustOptions, identify, robust_scale
 from calib.model import CalibrationModel
+from calib.robust import suspect_outliers
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses
@@ -198,3 +199,49 @@ def test_reweighted_levenberg_marquardt_downweights_outliers():
     assert fit.weights[[5, 30]].max() < 0.02 < 0.5 < fit.weights[[0, 20, 39]].min()
     np.testing.assert_allclose(fit.fit.x, truth, atol=3e-3)
     np.testing.assert_allclose(fit.residual.reshape(40, 3), data - line(fit.fit.x), atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- the screen
+def _screen(model: CalibrationModel, obs: Observations, fit) -> bool:
+    """The screen at a least-squares fit: its residual and Jacobian, as identify builds them."""
+    pred = model.predict(fit.values, obs.commands)
+    residual = (obs.measured - pred.targets).reshape(-1)
+    jac = -model.jacobian(fit.values, pred)[:, fit.estimated]
+    return suspect_outliers(residual, jac, residual.size // 3, jac.shape[1], RobustOptions())
+
+
+def test_the_screen_runs_the_robust_stage_exactly_when_outliers_may_hide(bench, spoiled80):
+    clean, obs, bad, screened_clean, screened_spoiled = spoiled80
+    model = bench["model"]
+    assert not _screen(model, clean, identify(model, clean, robust=False))
+    assert _screen(model, obs, identify(model, obs, robust=False))
+    # without the screen (the robust stage always run) the answers are the same
+    always = RobustOptions(screen=0.0)
+    full_clean = identify(model, clean, robust_options=always)
+    assert full_clean.rejected == screened_clean.rejected == ()
+    np.testing.assert_allclose(screened_clean.values, full_clean.values, rtol=0, atol=1e-9)
+    full_spoiled = identify(model, obs, robust_options=always)
+    assert {(r.pose_index, r.target_index) for r in full_spoiled.rejected} == bad
+    keys = [(r.pose_index, r.target_index) for r in screened_spoiled.rejected]
+    assert keys == [(r.pose_index, r.target_index) for r in full_spoiled.rejected]
+    np.testing.assert_allclose(screened_spoiled.values, full_spoiled.values, rtol=0, atol=1e-9)
+
+
+def test_the_screen_unmasks_an_outlier_at_a_high_leverage_pose(bench):
+    """A single displaced reading at the pose with the largest leverage: least squares pulls
+    towards it, its own residual shrinks, its deleted residual does not."""
+    clean, _ = _clean(bench, 40, 11)
+    model = bench["model"]
+    plain = identify(model, clean, robust=False)
+    pred = model.predict(plain.values, clean.commands)
+    jac = model.jacobian(plain.values, pred)[:, plain.estimated]
+    hat = jac @ np.linalg.solve(jac.T @ jac, jac.T)
+    leverage = np.diag(hat).reshape(40, -1).sum(axis=1)  # per pose, all its targets
+    pose = int(np.argmax(leverage))
+    measured = clean.measured.copy()
+    measured[pose, 0] += [0.2 * JUMP, 0.0, 0.0]
+    spoiled = Observations(clean.commands, measured)
+    assert leverage[pose] > 2 * np.median(leverage)
+    assert _screen(model, spoiled, identify(model, spoiled, robust=False))
+    result = identify(model, spoiled)
+    assert [(r.pose_index, r.target_index) for r in result.rejected] == [(pose, 0)]

@@ -1,10 +1,15 @@
-"""Batched forward kinematics: the same Newton as twin.kinematics, many poses.
+"""Batched forward kinematics: the same Newton as twin.kinematics, many poses at once.
 
-A serial chain (no free dof) needs no Newton: one kinematics pass per pose.
+A serial chain (no free dof) needs no Newton: one kinematics pass.
 
-``mujoco.batch.Batch`` runs the kinematics and the site Jacobians of every pose on a thread
-pool; the Newton steps are solved for all poses at once with numpy. Each pose is checked
-against the same tolerance as the single-pose solve, and a pose that fails raises.
+Each Newton step computes the frames of every pose with the numpy kinematic tree
+(twin.kinematics_tree: MuJoCo's ``mj_kinematics`` vectorised over poses), the closure
+residual and Jacobian from them, and the step by elimination per closure
+(twin.kinematics_reduced: each limb's private joints eliminated, a small system over the
+shared ones). Steps, damping of long steps, tolerance, stall rule and failure are those of
+the single-pose solve; each pose is checked against the same tolerance, and a pose that fails
+raises. Chunks of poses may run on a thread pool, but numpy holds the GIL between its many
+short operations: measured on 2 cores, a second thread adds at most ~10 %.
 """
 
 from __future__ import annotations
@@ -15,14 +20,21 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from mujoco.batch import Batch
 
-from twin.closure import closure_sites
-from twin.dof_axes import DofAxes
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import ACCEPT, MAX_ITER, MAX_STEP, TOLERANCE, check_commands
+from twin.kinematics_fast import (
+    PREDICT_MIN,
+    FastKinematics,
+    closure_residual_soa,
+    fast_kinematics,
+    integrate_soa,
+    one_blas_thread,
+    predict_start,
+)
+from twin.kinematics_tree import TreeFrames, tree_frames
 from twin.mechanism import Mechanism
-from twin.rotations import quat_from_rotvec, quat_multiply, rotvec_from_matrix
+from twin.rotations import quat_from_rotvec, quat_multiply
 
 FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 BALL = int(mujoco.mjtJoint.mjJNT_BALL)
@@ -56,35 +68,9 @@ def integrate_positions(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray)
     return out
 
 
-def _residual(mech: Mechanism, xpos: np.ndarray, xmat: np.ndarray) -> np.ndarray:
-    a, b = closure_sites(mech)
-    dpos = xpos[:, a] - xpos[:, b]
-    ra = xmat[:, a].reshape(len(xpos), -1, 3, 3)
-    rb = xmat[:, b].reshape(len(xpos), -1, 3, 3)
-    drot = rotvec_from_matrix(ra @ np.swapaxes(rb, -1, -2))
-    rows = []
-    for i, c in enumerate(mech.closures):
-        rows.append(dpos[:, i])
-        if c.kind == "weld":
-            rows.append(drot[:, i])
-    return np.concatenate(rows, axis=1)
-
-
-def _jacobian(mech: Mechanism, axes: DofAxes, frames: dict, ids: np.ndarray) -> np.ndarray:
-    a, b = closure_sites(mech)
-    p = frames["site_xpos"][ids][:, np.concatenate([a, b])]
-    return axes.closure_jacobian(
-        mech,
-        frames["xaxis"][ids],
-        frames["xanchor"][ids],
-        frames["xmat"][ids],
-        p,
-        mech.free_dofs(),
-    )
-
-
-FIELDS = ("site_xpos", "site_xmat", "xaxis", "xanchor", "xmat")
-CHUNK = 512  # poses solved together: bounds the memory of the stacked Jacobians
+FIELDS = ("site_xpos", "site_xmat", "xaxis", "xanchor", "xmat")  # MuJoCo's frame fields
+CHUNK = 1024  # poses solved together: long numpy operations, arrays still in cache
+PARALLEL_MIN = 2048  # fewer poses than this run on one thread (threads cost more)
 
 
 def forward_batch(
@@ -97,7 +83,8 @@ def forward_batch(
     """Forward kinematics for commands (N, A) (SI); raises ClosureError naming failed poses.
 
     ``start``: one configuration (nq,) or one per pose (N, nq), e.g. the previous solution
-    when the same poses are solved again for slightly different parameters.
+    when the same poses are solved again for slightly different parameters. ``nthread``: 0
+    for one thread per processor (used only for many poses), else at most that many.
     """
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
     if commands.shape[1:] != (mech.n_actuators,):
@@ -117,119 +104,117 @@ def forward_batch(
             raise type(exc)(f"pose {k}: {exc}") from None
     n = len(commands)
     m = mech.model
-    a, b = closure_sites(mech)
     q0 = np.asarray(mech.home_qpos if start is None else start, dtype=float)
     if q0.ndim == 2 and q0.shape != (n, m.nq):
         raise ClosureError(f"start must be ({m.nq},) or ({n}, {m.nq}), got {q0.shape}")
     qpos = np.array(np.broadcast_to(q0, (n, m.nq)))
     qpos[:, mech.actuator_qpos] = commands
-    if mech.free_dofs().size == 0:
-        return _direct(mech, qpos)
-    residual = np.full(n, np.inf)
-    shapes = {
-        "site_xpos": (m.nsite, 3),
-        "site_xmat": (m.nsite, 9),
-        "xaxis": (m.njnt, 3),
-        "xanchor": (m.njnt, 3),
-        "xmat": (m.nbody, 9),
-    }
-    frames = {f: np.zeros((n, *shapes[f])) for f in ("site_xpos", "site_xmat")}
+    fk = fast_kinematics(mech)
+    q = np.ascontiguousarray(qpos.T)  # (nq, N)
+    if start is None and n >= PREDICT_MIN and fk.closure is not None:
+        predict_start(fk, q, commands)
+    residual = np.zeros(n)
+    sites = np.zeros((3, 3 + 1, len(fk.out_sites), n))  # position, then rotation columns
     chunks = [slice(i, min(n, i + CHUNK)) for i in range(0, n, CHUNK)]
-    workers = max(1, min(len(chunks), nthread if nthread > 0 else (os.cpu_count() or 1)))
+    workers = 1 if n < PARALLEL_MIN else (nthread if nthread > 0 else (os.cpu_count() or 1))
+    workers = max(1, min(len(chunks), workers))
 
     def work(k: int) -> int:
-        batch = Batch(m, nsim=min(n, CHUNK), nthread=1)
-        bound = {f: batch.bind(f) for f in ("qpos", *FIELDS)}
-        axes = DofAxes(m, np.concatenate([a, b]), mech.free_dofs())
         its = 0
         for sl in chunks[k::workers]:
-            chunk = {f: frames[f][sl] for f in frames}
-            its = max(its, _solve_chunk(mech, batch, bound, axes, qpos[sl], residual[sl], chunk))
+            qc = np.ascontiguousarray(q[:, sl])
+            its = max(its, _solve_chunk(fk, qc, residual[sl], sites[..., sl]))
+            q[:, sl] = qc
         return its
 
-    if workers == 1:
-        iterations = work(0)
-    else:
-        with ThreadPoolExecutor(workers) as pool:
-            iterations = max(pool.map(work, range(workers)))
+    with one_blas_thread():
+        if workers == 1:
+            iterations = work(0)
+        else:
+            with ThreadPoolExecutor(workers) as pool:
+                iterations = max(pool.map(work, range(workers)))
     failed = np.flatnonzero(~(residual < ACCEPT))
     if failed.size:
         raise ClosureError(
             f"batched forward kinematics of '{mech.name}': {failed.size} of {n} poses did not "
             f"close (first: pose {failed[0]}, residual {residual[failed[0]]:.3g})"
         )
-    tool = mech.tool_site
     return BatchSolution(
-        qpos=qpos,
-        tool_rotation=frames["site_xmat"][:, tool].reshape(n, 3, 3),
-        tool_position=frames["site_xpos"][:, tool].copy(),
-        targets=frames["site_xpos"][:, mech.target_sites].copy(),
+        qpos=np.ascontiguousarray(q.T),
+        tool_rotation=np.moveaxis(sites[:, 1:, 0], -1, 0).copy(),
+        tool_position=sites[:, 0, 0].T.copy(),
+        targets=np.moveaxis(sites[:, 0, 1:], (0, 1, 2), (2, 1, 0)).copy(),
         residual=residual,
         iterations=iterations,
     )
 
 
-def _direct(mech: Mechanism, qpos: np.ndarray) -> BatchSolution:
-    """Every joint commanded (a serial chain): one kinematics pass per pose, nothing to solve."""
-    m, n = mech.model, len(qpos)
-    tool_r, tool_p = np.zeros((n, 3, 3)), np.zeros((n, 3))
-    targets = np.zeros((n, mech.n_targets, 3))
-    for chunk in range(0, n, CHUNK):
-        ids = np.arange(chunk, min(n, chunk + CHUNK))
-        batch = Batch(m, nsim=len(ids), nthread=1)
-        bound = {f: batch.bind(f) for f in ("qpos", "site_xpos", "site_xmat")}
-        bound["qpos"][:] = qpos[ids]
-        batch.forward(stage=mujoco.mjtStage.mjSTAGE_POS)
-        tool_r[ids] = bound["site_xmat"][:, mech.tool_site].reshape(-1, 3, 3)
-        tool_p[ids] = bound["site_xpos"][:, mech.tool_site]
-        targets[ids] = bound["site_xpos"][:, mech.target_sites]
-    return BatchSolution(qpos, tool_r, tool_p, targets, np.zeros(n), 0)
-
-
-def _solve_chunk(
-    mech: Mechanism,
-    batch: Batch,
-    bound: dict,
-    axes: DofAxes,
-    qpos: np.ndarray,
-    residual: np.ndarray,
-    frames: dict,
-) -> int:
-    """Newton on one chunk, in place on qpos, residual and the output frames (views)."""
-    m = mech.model
-    n = len(qpos)
-    free = mech.free_dofs()
+def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: np.ndarray) -> int:
+    """Newton on one chunk of configurations q (nq, n), in place on q, residual and out."""
+    mech, m = fk.mech, fk.model
+    n = q.shape[1]
+    cs = fk.closure
+    numbers = fk.numbers()
+    if cs is None:  # a serial chain: every joint commanded, nothing to solve
+        frames = tree_frames(fk.tree, m, q, numbers)
+        _store(fk, frames, out, np.ones(n, dtype=bool), np.arange(n))
+        residual[:] = 0.0
+        return 0
+    welds = any(c.kind == "weld" for c in mech.closures)
     active = np.arange(n)
     best = np.full(n, np.inf)
     stall = np.zeros(n, dtype=int)
     it = 0
     for it in range(MAX_ITER + 1):
-        bound["qpos"][active] = qpos[active]
-        batch.forward(ids=active, stage=mujoco.mjtStage.mjSTAGE_POS)
-        r = _residual(mech, bound["site_xpos"][active], bound["site_xmat"][active])
-        err = np.max(np.abs(r), axis=1)
+        qa = q[:, active]
+        frames = tree_frames(fk.tree, m, qa, numbers)
+        pos = frames.site_positions(m, cs.sites)
+        rot = frames.site_rotations(m, cs.sites) if welds else None
+        r = closure_residual_soa(mech, pos, rot)
+        err = np.max(np.abs(r), axis=0)
         residual[active] = err
         stall[active] = np.where(err >= 0.5 * best[active], stall[active] + 1, 0)
         best[active] = np.minimum(best[active], err)
         done = (err < TOLERANCE) | ((stall[active] >= 3) & (best[active] < ACCEPT))
         done |= ~np.isfinite(err)
+        if it == MAX_ITER:
+            done[:] = True
+        if np.any(done):
+            _store(fk, frames, out, done, active)
         keep = ~done
-        if not np.any(keep) or it == MAX_ITER:
+        if not np.any(keep):
             break
-        ids = active[keep]
-        jac = _jacobian(mech, axes, bound, ids)
-        rhs = -r[keep][:, :, None]
-        if jac.shape[1] != jac.shape[2]:  # not square: least squares by normal equations
-            rhs = np.swapaxes(jac, 1, 2) @ rhs
-            jac = np.swapaxes(jac, 1, 2) @ jac
-        step = np.linalg.solve(jac, rhs)[:, :, 0]
-        norm = np.linalg.norm(step, axis=1, keepdims=True)
+        part = None if np.all(keep) else keep
+        step = cs.solve(cs.matrices(frames, pos, -r[:, None], part))[:, 0]
+        norm = np.sqrt(np.sum(step * step, axis=0))
         step *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-300))
-        dq = np.zeros((len(ids), m.nv))
-        dq[:, free] = step
-        qpos[ids] = integrate_positions(m, qpos[ids], dq)
+        ids = active[keep]
+        qk = q[:, ids]
+        integrate_soa(fk, qk, step)
+        q[:, ids] = qk
         active = ids
-    # a simulation left out of later calls keeps the frames of its last (converged) call
-    for f in ("site_xpos", "site_xmat"):
-        frames[f][:] = bound[f][:n]
     return it
+
+
+def _subset(frames: TreeFrames, mask: np.ndarray) -> TreeFrames:
+    """The frames of the configurations ``mask`` selects."""
+    return TreeFrames(
+        frames.xpos[..., mask],
+        frames.xmat[..., mask],
+        frames.xanchor[..., mask],
+        frames.xaxis[..., mask],
+    )
+
+
+def _store(
+    fk: FastKinematics, frames: TreeFrames, out: np.ndarray, done: np.ndarray, active: np.ndarray
+) -> None:
+    """Tool and target frames of the poses that are done (``done`` over ``active``) into
+    ``out`` (3, 4, S, N): column 0 the sites' positions, columns 1-3 the tool's rotation."""
+    sub = _subset(frames, done) if not np.all(done) else frames
+    m = fk.model
+    ids = active[done]
+    pos = sub.site_positions(m, fk.out_sites)  # (3, S, k)
+    out[:, 0, :, ids] = np.moveaxis(pos, -1, 0)
+    rot = sub.site_rotations(m, fk.out_sites[:1])  # (3, 3, 1, k)
+    out[:, 1:, 0, ids] = rot[:, :, 0]

@@ -266,17 +266,20 @@ class ParameterSet:
         (N, nsite, 3) and ``screws`` from :meth:`screws_batch`."""
         t, w, o = screws
         sites = np.asarray(sites, dtype=int)
-        p = site_xpos[:, sites]  # (N, S, 3)
+        n_pose, n = len(site_xpos), len(self)
         affected = self.subtree[:, model.site_bodyid[sites]].T.copy()  # (S, n)
         site_kind = self.kind == 2
         affected[:, site_kind] = sites[:, None] == self.element[site_kind][None, :]
-        lever = p[:, :, None, :] - o[:, None, :, :]  # (N, S, n, 3)
-        wn = w[:, None, :, :]
+        si, k = np.nonzero(affected)  # only the (site, parameter) pairs that move
+        lever = site_xpos[:, sites[si]] - o[:, k]  # (N, P, 3)
+        wk = w[:, k]
         cross = (
-            wn[..., [1, 2, 0]] * lever[..., [2, 0, 1]] - wn[..., [2, 0, 1]] * lever[..., [1, 2, 0]]
+            wk[..., [1, 2, 0]] * lever[..., [2, 0, 1]] - wk[..., [2, 0, 1]] * lever[..., [1, 2, 0]]
         )
-        dp = (t[:, None, :, :] + cross) * affected[None, :, :, None]
-        dw = np.broadcast_to(wn, dp.shape) * affected[None, :, :, None]
+        dp = np.zeros((n_pose, len(sites), n, 3))
+        dw = np.zeros((n_pose, len(sites), n, 3))
+        dp[:, si, k] = t[:, k] + cross
+        dw[:, si, k] = wk
         return np.swapaxes(dp, 2, 3), np.swapaxes(dw, 2, 3)
 
     def site_derivatives(

@@ -1,0 +1,78 @@
+"""Compensation by the predicted pose error twist (the first paper's Eq. 16), prepared once.
+
+TwistCompensation computes each pose's first inverse kinematics and twist Jacobian once and
+corrects the poses for many estimates; it must give exactly the commands of the per-pose
+procedure written out here, and no correction for a zero estimate.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib.compensation import TwistCompensation, twist_compensated_commands
+from calib.model import CalibrationModel
+from twin.kinematics import inverse
+from twin.mechanism import Mechanism
+from twin.parameter_file import load_parameter_set
+from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
+from twin.sensitivity import tool_twist_jacobian
+from twin.workspace import layer_poses
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def polisher():
+    nominal = Mechanism.from_xml(ROOT / "models/polisher.xml")
+    params = load_parameter_set(ROOT / "models/polisher.params.toml", nominal.model)
+    model = CalibrationModel(nominal, params)
+    poses = layer_poses(nominal, [0.03], 3, (0.2, 0.2))
+    rng = np.random.default_rng(5)
+    base = np.zeros(len(params))
+    base[rng.choice(len(params), 4, replace=False)] = rng.uniform(-2e-3, 2e-3, 4)
+    columns = np.sort(rng.choice(len(params), 12, replace=False))
+    return model, base, poses, columns, rng
+
+
+def _per_pose(model, base, delta, columns, poses):
+    """Eq. (16) pose by pose: inverse kinematics, B, corrected pose, inverse kinematics."""
+    mech = model.mechanism(base)
+    out, q = [], None
+    for pose in poses:
+        sol = inverse(mech, pose, start=q)
+        twist = tool_twist_jacobian(mech, model.params, base, sol.qpos)[:, columns] @ delta
+        r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
+        corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
+        out.append(inverse(mech, corrected, start=sol.qpos).actuators)
+        q = sol.qpos
+    return np.array(out)
+
+
+def test_prepared_compensation_equals_the_per_pose_procedure(polisher):
+    model, base, poses, columns, rng = polisher
+    prepared = TwistCompensation.prepare(model, base, poses)
+    for _ in range(2):  # two estimates from one preparation
+        delta = rng.uniform(-1e-3, 1e-3, len(columns))
+        expected = _per_pose(model, base, delta, columns, poses)
+        np.testing.assert_allclose(prepared.commands(delta, columns), expected, atol=1e-12)
+        np.testing.assert_allclose(
+            twist_compensated_commands(model, base, delta, columns, poses), expected, atol=1e-12
+        )
+        assert np.abs(expected - prepared.commands(0 * delta, columns)).max() > 1e-6
+
+
+def test_zero_estimate_gives_the_controllers_own_commands(polisher):
+    model, base, poses, columns, _ = polisher
+    prepared = TwistCompensation.prepare(model, base, poses)
+    plain = np.array(
+        [
+            inverse(model.mechanism(base), p, start=q).actuators
+            for p, q in zip(poses, prepared.qpos, strict=True)
+        ]
+    )
+    np.testing.assert_allclose(
+        prepared.commands(np.zeros(len(columns)), columns), plain, atol=1e-12
+    )
