@@ -13,17 +13,15 @@ from typing import Any
 import numpy as np
 
 from calib.coarse import CoarseResult, coarse_calibration
+from calib.compensation import TwistCompensation
 from calib.estimators.linear import LinearEstimate
 from calib.fine import FineProblem, estimate, fine_problem
 from calib.model import CalibrationModel
 from calib.scoring import PoseErrors, max_mean_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
-from twin.kinematics import inverse
 from twin.kinematics_batch import forward_batch
 from twin.measurement import measure as twin_measure
-from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
-from twin.sensitivity import tool_twist_jacobian
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import commands_for_poses, layer_poses
 
@@ -205,19 +203,8 @@ def twist_compensated_many(
     """Eq. (16) for several estimates at once: :func:`calib.compensation.
     twist_compensated_commands` with the inverse kinematics of each nominal pose and its B
     computed once and shared by every estimate (the same numbers, less work)."""
-    mech = model.mechanism(base_values)
-    out = {m: np.empty((len(poses), mech.n_actuators)) for m in deltas}
-    q = None
-    for i, pose in enumerate(np.atleast_2d(poses)):
-        sol = inverse(mech, pose, start=q)
-        b = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)[:, columns]
-        for m, delta in deltas.items():
-            twist = b @ delta
-            r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
-            corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
-            out[m][i] = inverse(mech, corrected, start=sol.qpos).actuators
-        q = sol.qpos
-    return out
+    comp = TwistCompensation.prepare(model, base_values, poses)
+    return {m: comp.commands(delta, columns) for m, delta in deltas.items()}
 
 
 def stage_commands(

@@ -158,7 +158,7 @@ def test_non_convergence_exits_3_and_says_which_criterion(arm_run, capsys):
     assert "did not converge (iteration limit)" in capsys.readouterr().err
 
 
-def test_diagnosis_skips_gravity_on_defaulted_masses_and_works_in_the_tracker_frame(
+def test_diagnosis_loads_only_a_payload_on_defaulted_masses_in_the_tracker_frame(
     arm_run, tmp_path, capsys
 ):
     _, out = arm_run
@@ -166,7 +166,9 @@ def test_diagnosis_skips_gravity_on_defaulted_masses_and_works_in_the_tracker_fr
     data = out / "datasets/one_reflector.csv"
     assert main(["diagnose", *_args(data, "--sigma-mm", "0.021", "--out", str(d))]) == 0
     result = json.loads(d.read_text())
-    assert "gravity_compliance" not in result["candidates"]
-    assert any("no masses" in n for n in result["notes"])
+    # the model declares no masses: its own weight is not invented, gravity is tried only as
+    # a tool payload whose mass and the compliances are fitted as products
+    assert "gravity_compliance" in result["candidates"]
+    assert any("tool payload only" in n and "no masses" in n for n in result["notes"])
     # registered into the base frame, the residual is the tracker noise: nothing invented
     assert result["diagnosed_effect"] == "none"
