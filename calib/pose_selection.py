@@ -8,7 +8,10 @@ observability index of their stack (calib.observability, column-scaled):
 * ``paper_selection``: that greedy run from many random starting sets, keeping the best;
 * ``exchange``: a DETMAX-style exchange (Mitchell 1974) at a fixed count: swap a selected pose
   for a candidate whenever the swap improves the index, until no swap does.
-Ties are broken by the lower candidate index, so results are deterministic.
+Ties (values within ``TIE_RTOL`` of each other, relative: round-off is no preference) are
+broken by the lower candidate index, and a swap must gain more than that, so results do not
+depend on the BLAS kernel. The blocks must all have the same shape (k, n); each step
+evaluates every candidate at once (calib.observability.index_with_each).
 """
 
 from __future__ import annotations
@@ -18,7 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.exceptions import IdentifiabilityError
-from calib.observability import better, observability
+from calib.observability import MAXIMISE, better, index_with_each, observability
+
+TIE_RTOL = 1e-8  # index values this close (relative) are equal: the lower index wins
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,31 @@ def _value(blocks: list[np.ndarray], chosen: list[int], name: str) -> float:
     return observability(np.vstack([blocks[i] for i in chosen]), name, allow_deficient=True)
 
 
+def _stack(blocks: list[np.ndarray] | np.ndarray) -> np.ndarray:
+    stack = np.asarray(blocks, dtype=float)
+    if stack.ndim != 3:
+        raise ValueError("pose blocks must all have the same shape (rows, parameters)")
+    return stack
+
+
+def _margin(value: float) -> float:
+    return TIE_RTOL * abs(value) if np.isfinite(value) else 0.0
+
+
+def _gains(name: str, a: float, b: float) -> bool:
+    """Is ``a`` better than ``b`` by more than round-off?"""
+    return bool(a > b + _margin(b) if MAXIMISE[name] else a < b - _margin(b))
+
+
+def _pick(values: np.ndarray, name: str) -> int:
+    """Position of the best value; among values within round-off of it, the first."""
+    best = float(np.max(values) if MAXIMISE[name] else np.min(values))
+    if not np.isfinite(best):
+        return int(np.flatnonzero(values == best)[0])
+    close = np.abs(values - best) <= _margin(best)
+    return int(np.flatnonzero(close)[0])
+
+
 def greedy(
     blocks: list[np.ndarray], start: list[int], until: int, name: str = "condition"
 ) -> Selection:
@@ -45,18 +75,15 @@ def greedy(
         raise IdentifiabilityError(
             f"asked for {until} poses from {len(blocks)} candidates: too few candidates"
         )
+    stack = _stack(blocks)
     chosen = list(start)
     curve = [_value(blocks, chosen, name)]
     while len(chosen) < until:
-        best_i, best_v = -1, None
-        for i in range(len(blocks)):
-            if i in chosen:
-                continue
-            v = _value(blocks, [*chosen, i], name)
-            if best_v is None or better(name, v, best_v):
-                best_i, best_v = i, v
-        chosen.append(best_i)
-        curve.append(float(best_v))
+        rest = [i for i in range(len(stack)) if i not in chosen]
+        values = index_with_each(np.vstack(stack[chosen]), stack[rest], name)
+        k = _pick(values, name)
+        chosen.append(rest[k])
+        curve.append(float(values[k]))
     return Selection(chosen, curve, len(start), name)
 
 
@@ -78,11 +105,7 @@ def paper_selection(
     for _ in range(n_starts):
         start = sorted(rng.choice(len(blocks), size=n_initial, replace=False).tolist())
         runs.append(greedy(blocks, start, until, name))
-    best = runs[0]
-    for r in runs[1:]:
-        if better(name, r.final, best.final):
-            best = r
-    return best, runs
+    return runs[_pick(np.array([r.final for r in runs]), name)], runs
 
 
 def stopping_count(selection: Selection, rtol: float = 0.01, window: int = 3) -> int:
@@ -104,22 +127,21 @@ def exchange(
     blocks: list[np.ndarray], start: list[int], name: str = "d_optimality", max_sweeps: int = 20
 ) -> tuple[list[int], float]:
     """Swap selected poses for candidates while that improves the index (fixed count)."""
+    stack = _stack(blocks)
     chosen = list(start)
     value = _value(blocks, chosen, name)
     for _ in range(max_sweeps):
         improved = False
         for pos in range(len(chosen)):
-            best_j, best_v = -1, value
-            for j in range(len(blocks)):
-                if j in chosen:
-                    continue
-                trial = [*chosen[:pos], j, *chosen[pos + 1 :]]
-                v = _value(blocks, trial, name)
-                if better(name, v, best_v):
-                    best_j, best_v = j, v
-            if best_j >= 0:
-                chosen[pos] = best_j
-                value = best_v
+            rest = [j for j in range(len(stack)) if j not in chosen]
+            if not rest:
+                break
+            kept = [*chosen[:pos], *chosen[pos + 1 :]]
+            values = index_with_each(np.vstack(stack[kept]), stack[rest], name)
+            k = _pick(values, name)
+            if _gains(name, values[k], value):
+                chosen[pos] = rest[k]
+                value = float(values[k])
                 improved = True
         if not improved:
             break

@@ -34,7 +34,6 @@ from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.sweep_draws import map_draws
-from twin.kinematics import forward
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
@@ -66,7 +65,9 @@ def identify_noise_draws(
     b_ver: np.ndarray,
 ) -> dict[str, Any]:
     """One pose set identified by LM over its noise draws (``measured``: (D, N, T, 3)), each
-    draw starting from the previous draw's estimate; a sweep task (plain data in and out).
+    draw starting from the previous draw's estimate (one calibration model for all, so the
+    closure solves start from the previous draw's configurations); a sweep task (plain data
+    in and out).
 
     Returns the largest parameter error (mm, deg) and the verification peaks (mm, deg) of each
     draw that converged, and how many did not."""
@@ -74,8 +75,8 @@ def identify_noise_draws(
     params = load_parameter_set(error_model_path, nominal.model)
     out: dict[str, Any] = {"param": [], "pos": [], "ori": [], "failed": 0}
     start = np.zeros(len(params))
+    model = CalibrationModel(nominal, params)  # a draw's closure solves start from the last
     for readings in measured:
-        model = CalibrationModel(nominal, params)  # each draw's closure solves start cold
         try:
             res = identify(model, Observations(commands, readings), x0=start)
         except CalibError:
@@ -121,8 +122,8 @@ def run(
     for k, v in enumerate(best.index_by_count):
         recorder.log_metric(f"{index}_by_count", "pose_count", best.start_count + k, v)
     recorder.log_mechanism(nominal)
-    for i, k in enumerate(optimal):
-        recorder.log_pose("optimal_pose", i, nominal, forward(nominal, b_cmds[k]).qpos)
+    for i, q in enumerate(forward_batch(nominal, b_cmds[optimal]).qpos):
+        recorder.log_pose("optimal_pose", i, nominal, q)
     progress.step("our design: D-optimal exchange over boundary + random reachable poses")
     n_extra = scenario.get("design.extra_random_candidates", int)
     _, r_cmds = random_poses(nominal, n_extra, rng)
@@ -139,18 +140,22 @@ def run(
         "random_same_count": rand_same_cmds,
         "random_256": rand_many_cmds,
     }
+    set_jacobians = {  # the candidates' blocks computed once, the random sets' once each
+        "optimal": np.vstack([all_blocks[k] for k in optimal]),
+        "exchange": np.vstack([all_blocks[k] for k in ex_idx]),
+        "random_same_count": np.vstack(_blocks(model, rand_same_cmds)),
+        "random_256": np.vstack(_blocks(model, rand_many_cmds)),
+    }
     indices = {
-        name: {
-            "condition": observability(np.vstack(_blocks(model, c)), "condition"),
-            "d_optimality": observability(np.vstack(_blocks(model, c)), "d_optimality"),
-        }
-        for name, c in sets.items()
+        name: {k: observability(jac, k) for k in ("condition", "d_optimality")}
+        for name, jac in set_jacobians.items()
     }
 
     progress.step("verification grid and its pose-error Jacobians")
     _, v_cmds = grid_poses(nominal, 3, 8, rng, margin=0.25, stroke_margin=2e-3)
+    v_qpos = forward_batch(truth, v_cmds).qpos
     b_ver = np.array(
-        [tool_twist_jacobian(truth, params, truth_values, forward(truth, c).qpos) for c in v_cmds]
+        [tool_twist_jacobian(truth, params, truth_values, q) for q in v_qpos]
     )  # (V, 6, n): truth side of the scoring only
 
     draws = scenario.get("evaluation.noise_draws", int)

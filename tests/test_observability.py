@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calib.exceptions import IdentifiabilityError
-from calib.observability import INDICES, all_indices, better, observability
+from calib.observability import INDICES, all_indices, better, index_with_each, observability
 
 
 def test_orthonormal_columns_are_ideal():
@@ -56,3 +56,42 @@ def test_rank_deficient_is_an_error_or_the_worst_value():
 def test_better_follows_the_direction_of_each_index():
     assert better("condition", 2.0, 3.0)
     assert better("product", 3.0, 2.0)
+
+
+def _stacked_indices(base: np.ndarray, blocks: np.ndarray, name: str) -> np.ndarray:
+    return np.array(
+        [observability(np.vstack([base, b]), name, allow_deficient=True) for b in blocks]
+    )
+
+
+def test_index_with_each_equals_the_stacked_index():
+    rng = np.random.default_rng(5)
+    units = np.logspace(-3, 2, 12)  # columns in very different units
+    base = rng.normal(size=(20, 12)) * units
+    blocks = rng.normal(size=(7, 3, 12)) * units
+    for name in INDICES:
+        np.testing.assert_allclose(
+            index_with_each(base, blocks, name), _stacked_indices(base, blocks, name), rtol=1e-12
+        )
+    # a base with fewer rows than parameters: the block completes it or the index is worst
+    np.testing.assert_allclose(
+        index_with_each(base[:10], blocks, "condition"),
+        _stacked_indices(base[:10], blocks, "condition"),
+        rtol=1e-12,
+    )
+    assert np.all(index_with_each(base[:5], blocks, "condition") == np.inf)
+
+
+def test_index_with_each_sees_rank_deficiency_like_the_stack():
+    rng = np.random.default_rng(6)
+    base = rng.normal(size=(15, 5))
+    blocks = rng.normal(size=(4, 3, 5))
+    base[:, 4] = base[:, 0] - base[:, 2]
+    blocks[1:, :, 4] = blocks[1:, :, 0] - blocks[1:, :, 2]  # only block 0 restores the rank
+    values = index_with_each(base, blocks, "d_optimality")
+    assert np.isfinite(values[0]) and np.all(values[1:] == -np.inf)
+    np.testing.assert_allclose(values, _stacked_indices(base, blocks, "d_optimality"), rtol=1e-12)
+    base[:, 3] = 0.0
+    blocks[:, :, 3] = 1e-14 * base[:3, 0]  # round-off next to unit columns: zeroed, not scaled
+    assert np.all(index_with_each(base, blocks, "condition") == np.inf)
+    assert np.all(_stacked_indices(base, blocks, "condition") == np.inf)

@@ -37,6 +37,22 @@ def test_greedy_adds_the_best_pose_each_time():
     assert greedy(blocks, [0, 1, 2], 8, "condition").indices == sel.indices  # deterministic
 
 
+def test_round_off_ties_go_to_the_lower_index():
+    """A twin of each candidate (rows reversed and negated: the same Gram matrix, the same
+    index up to round-off) is never preferred to the candidate it copies."""
+    blocks = _blocks(3, n=12)
+    twins = blocks + [-b[::-1] for b in blocks]
+    for name in ("condition", "d_optimality"):
+        sel = greedy(twins, [0, 1, 2], 10, name)
+        for k, i in enumerate(sel.indices):
+            if i >= len(blocks):
+                assert i - len(blocks) in sel.indices[:k]
+        assert sel.indices == greedy(blocks + blocks, [0, 1, 2], 10, name).indices
+        assert sel.index_by_count == pytest.approx(
+            greedy(blocks + blocks, [0, 1, 2], 10, name).index_by_count, rel=1e-12
+        )
+
+
 def test_exchange_never_worsens_d_optimality():
     blocks = _blocks(1)
     start = list(range(6))
