@@ -74,8 +74,9 @@ from calib.diagnosis_verdict import (
     score_of,
     test_errors,
 )
-from calib.identify import IdentificationResult, Observations, _one_blas_thread
+from calib.identify import IdentificationResult, Observations
 from calib.model import CalibrationModel
+from twin.kinematics_fast import on_one_blas_thread
 
 __all__ = [
     "GRAVITY_SKIPPED",
@@ -123,6 +124,7 @@ def _time(order, time_s, n) -> tuple[np.ndarray, str]:
     return (np.arange(n) if order is None else np.asarray(order)).astype(float), "pose"
 
 
+@on_one_blas_thread
 def diagnose(
     model: CalibrationModel,
     obs: Observations,
@@ -148,43 +150,6 @@ def diagnose(
     an effect must lower their error too. ``min_gain``: the relative drop of the held-out RMS
     an effect must bring in every fold scheme; ``alpha``: the one-sided Wilcoxon level of the
     per-pose held-out improvement."""
-    with _one_blas_thread():
-        return _diagnose(
-            model,
-            obs,
-            result,
-            sigma_m,
-            order,
-            candidates,
-            folds,
-            alpha,
-            min_gain,
-            tracker_position_m,
-            time_s,
-            repeat_std_m,
-            n_repeats,
-            test,
-            max_effects,
-        )
-
-
-def _diagnose(
-    model,
-    obs,
-    result,
-    sigma_m,
-    order,
-    candidates,
-    folds,
-    alpha,
-    min_gain,
-    tracker_position_m,
-    time_s,
-    repeat_std_m,
-    n_repeats,
-    test,
-    max_effects,
-) -> Diagnosis:
     n_poses = len(obs.commands)
     time, unit = _time(order, time_s, n_poses)
     t0 = float(np.min(time))

@@ -13,7 +13,6 @@ Robust by default (calib.robust): gross outliers are found, listed and left out.
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -144,12 +143,6 @@ class IdentificationResult:
         return np.linalg.norm(measured - pred.targets, axis=-1)
 
 
-def _one_blas_thread() -> contextlib.AbstractContextManager:
-    """Numpy's BLAS on one thread: the products here are small, threads only cost
-    (twin.kinematics_fast.one_blas_thread; the library scan is done once per process)."""
-    return one_blas_thread()
-
-
 def identify(
     model: CalibrationModel,
     obs: Observations,
@@ -171,7 +164,7 @@ def identify(
         raise ValueError(f"observations frame must be one of {FRAMES}, got {obs.frame!r}")
     if prior is not None and np.shape(prior.std) != (model.n_parameters,):
         raise ValueError(f"prior std must have one entry per parameter ({model.n_parameters})")
-    with _one_blas_thread():
+    with one_blas_thread():
         return _identify(model, obs, x0, unidentifiable, options, robust, robust_options, prior)
 
 

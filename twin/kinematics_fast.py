@@ -14,6 +14,8 @@ from __future__ import annotations
 import contextlib
 import functools
 from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import mujoco
 import numpy as np
@@ -31,6 +33,9 @@ HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 MEMO_SIZE = 16  # machine structures kept
 _STRUCTURES: OrderedDict[bytes, KinematicStructure] = OrderedDict()
+
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 @functools.cache
@@ -54,6 +59,18 @@ def one_blas_thread() -> contextlib.AbstractContextManager:
     the same numbers to round-off, and every check has a tolerance)."""
     controller = _blas_controller()
     return contextlib.nullcontext() if controller is None else controller.limit(limits=1)
+
+
+def on_one_blas_thread(fn: F) -> F:
+    """``fn`` run inside :func:`one_blas_thread` (for entry points whose whole body is small
+    matrix work)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with one_blas_thread():
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
 
 
 def structure_key(mech: Mechanism) -> bytes:
