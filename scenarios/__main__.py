@@ -1,4 +1,5 @@
-"""Command line: ``python -m scenarios run NAME|PATH [--results DIR] [--no-record] [--no-figures]``, ``list``, and
+"""Command line: ``python -m scenarios run NAME|PATH [--results DIR] [--no-record]
+[--no-figures]``, ``list``, and
 ``sweep NAME|PATH --seeds N [--over truth|noise|both] [--set key=v1,v2 ...] [--engine ray|local]``
 (Ray: a local instance, or the cluster RAY_ADDRESS names)."""
 
