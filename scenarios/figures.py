@@ -26,14 +26,16 @@ CMAP = "viridis"
 Panel = tuple[str, np.ndarray, np.ndarray]  # (name, xy_mm (N, 2), errors (N,))
 
 
-def save_png(fig: plt.Figure, path: Path) -> Path:
-    """Write ``fig`` to ``path`` atomically (a temporary sibling, then a rename), then close it."""
+def save_png(fig: plt.Figure, path: Path, close: bool = True) -> Path:
+    """Write ``fig`` to ``path`` atomically (a temporary sibling, then a rename), then close it
+    (``close=False``: keep it open, to be drawn again with other data)."""
     try:
         return write_with_atomic(
             path, lambda tmp: fig.savefig(tmp, dpi=DPI, format="png"), suffix=".png.tmp"
         )
     finally:
-        plt.close(fig)
+        if close:
+            plt.close(fig)
 
 
 def _finite_max(values: np.ndarray) -> float:
