@@ -41,7 +41,6 @@ from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics_batch import forward_batch
 from twin.kinematics_fast import one_blas_thread
-from twin.workspace import commands_for_poses
 
 # Tolerances of the paper match (ours / paper, on all three layers as Table 5 reports them):
 # the rows that do not depend on the estimator, coarse and OLS, position max and mean.
@@ -76,7 +75,7 @@ def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) 
     plus 10^4 draws of the tracker noise."""
     params, problem = bench.machine.params, cal.problem
     coarse_mech = bench.model.mechanism(cal.coarse.values)
-    commands = commands_for_poses(coarse_mech, cal.fine_poses)
+    commands = cal.fine_commands  # the fine plan's commands at the coarse settings
     clean = forward_batch(bench.machine.truth, commands).targets
     dp_clean = (clean - nominal_targets(coarse_mech, cal.fine_poses)).reshape(-1)
     noise = bench.rng.normal(0.0, bench.sigma_m, size=(runs, dp_clean.size))

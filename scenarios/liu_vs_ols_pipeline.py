@@ -23,7 +23,7 @@ from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
 from twin.kinematics_batch import forward_batch
 from twin.measurement import measure as twin_measure
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import commands_for_poses, layer_poses
+from twin.workspace import checked_commands, commands_for_poses, layer_poses
 
 # First paper, Table 5 (experiment, "pose errors after calibration in three measurement
 # layers") and section 5 (simulation).
@@ -210,16 +210,20 @@ def twist_compensated_many(
 def stage_commands(
     bench: Bench, cal: Calibration, poses: np.ndarray, stages: list[str] | None = None
 ) -> dict[str, np.ndarray]:
-    """Commands of every stage for ``poses``: uncalibrated, coarse, each estimator (Eq. 16)."""
+    """Commands of every stage for ``poses``: uncalibrated, coarse, each estimator (Eq. 16).
+
+    The coarse commands are the first inverse kinematics of Eq. 16's preparation (the same
+    solves, pose after pose from the home configuration, on the same model), checked against
+    the workspace and the strokes as :func:`twin.workspace.commands_for_poses` does."""
     nominal = bench.machine.nominal
+    comp = TwistCompensation.prepare(bench.model, cal.coarse.values, poses)
+    coarse_mech = bench.model.mechanism(cal.coarse.values)
     out = {
         "uncalibrated": commands_for_poses(nominal, poses),  # before any calibration
-        "coarse": commands_for_poses(bench.model.mechanism(cal.coarse.values), poses),
+        "coarse": checked_commands(coarse_mech, poses, comp.qpos[:, coarse_mech.actuator_qpos]),
     }
     deltas = {m: est.x for m, (est, _) in cal.estimates.items() if stages is None or m in stages}
-    out.update(
-        twist_compensated_many(bench.model, cal.coarse.values, deltas, cal.problem.columns, poses)
-    )
+    out.update({m: comp.commands(delta, cal.problem.columns) for m, delta in deltas.items()})
     return out
 
 
