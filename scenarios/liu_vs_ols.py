@@ -81,6 +81,7 @@ def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) 
     noise = bench.rng.normal(0.0, bench.sigma_m, size=(runs, dp_clean.size))
     shown = params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
     scale = np.diag(shown)  # SI -> mm/deg per kept parameter
+    ys = dp_clean[None, :] + noise  # every estimator's measurements, formed once
     spread = {}
     for label, est in (
         ("ols", make_estimator("ols")),
@@ -89,7 +90,7 @@ def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) 
         ("liu_paper_deg", make_estimator("liu_paper", angle_unit="deg", is_angle=problem.is_angle)),
         ("liu_paper_rad", make_estimator("liu_paper", angle_unit="rad", is_angle=problem.is_angle)),
     ):
-        draws = est.fit_many(problem.h, dp_clean[None, :] + noise) * scale
+        draws = est.fit_many(problem.h, ys) * scale
         spread[label] = float(np.sqrt(np.sum(draws.var(axis=0, ddof=1))))
         progress.counter("estimators", len(spread), 5)
     return spread
