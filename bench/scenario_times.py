@@ -3,9 +3,8 @@ temporary results root, never results/. The slow studies (optimal_poses, every
 diagnosis_benchmark*, the 100-draw liu_vs_ols_draws; minutes to tens of minutes each) only
 with BENCH_ALL=1.
 
-liu_vs_ols is also timed without figures and recording: the scenario has no switch for it, so
-the benchmark stubs its figure writers (scenarios.liu_vs_ols_figures.write_figures and the
-parameter bar charts) for that one run; the study itself is unchanged.
+liu_vs_ols is also timed without figures and recording (``run_scenario(..., record=False,
+figures=False)``, the runner's switch; the study computes the same numbers).
 """
 
 from __future__ import annotations
@@ -14,7 +13,6 @@ import os
 import tempfile
 import time
 from pathlib import Path
-from unittest import mock
 
 from scenarios.config import REPO_ROOT
 from scenarios.runner import run_scenario
@@ -57,11 +55,7 @@ def scenario_times(everything: bool | None = None) -> tuple[dict, list[str], dic
                 continue
             print(f"scenario {name} {out[f'scenario_{name}_s']:.1f} s", flush=True)
             if name == "liu_vs_ols":
-                with (
-                    mock.patch("scenarios.liu_vs_ols_figures.write_figures", lambda *a: {}),
-                    mock.patch("scenarios.liu_vs_ols.parameter_bars_png", lambda *a: None),
-                ):
-                    t = _timed(name, root / "no_figures", record=False)
+                t = _timed(name, root / "no_figures", record=False, figures=False)
                 out["scenario_liu_vs_ols_no_figures_s"] = t
                 print(f"scenario liu_vs_ols without figures or recording {t:.1f} s", flush=True)
     return out, skipped, errors

@@ -61,7 +61,11 @@ class Problem:
 
     def rows(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g = self.geo[poses].reshape(-1, self.geo.shape[2])
-        return g, self.r[poses].reshape(-1)
+        return g, self.residual_rows(poses)
+
+    def residual_rows(self, poses: np.ndarray) -> np.ndarray:
+        """The residual of these poses, flat (the second part of :meth:`rows`)."""
+        return self.r[poses].reshape(-1)
 
     def basis(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Q, G^+) of the geometric columns of these poses."""
@@ -94,7 +98,7 @@ def fit(
 ) -> Fit:
     """Least squares of r by G beta + X theta on ``poses``; ``lower`` bounds theta below."""
     q, gplus = prob.basis(poses)
-    _, rt = prob.rows(poses)
+    rt = prob.residual_rows(poses)
     k = sum(x.shape[2] for x in xs)
     if k == 0:
         return Fit(np.zeros(0), gplus @ rt)
@@ -132,6 +136,30 @@ def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> np.ndarr
     return prob._cache[key]
 
 
+@dataclass(frozen=True)
+class Projection:
+    """The training residual with the geometry and the ``fixed`` columns projected out."""
+
+    q: np.ndarray  # orthonormal basis of the geometric and fixed columns of the poses
+    rp: np.ndarray  # the residual rows orthogonal to q
+    base: float  # |rp|^2
+    m: int  # rows
+
+
+def projection(prob: Problem, fixed: list[np.ndarray], poses: np.ndarray) -> Projection:
+    """What :func:`rss_over_grid` needs of the poses and ``fixed``, whatever the shape: one
+    computation serves the grid scan and every refinement of one candidate's shape."""
+    rt = prob.residual_rows(poses)
+    q0, _ = prob.basis(poses)
+    if fixed:
+        xf = _flat(fixed, poses).reshape(len(rt), -1)
+        q = _orth(np.hstack([q0, xf - q0 @ (q0.T @ xf)]))
+    else:
+        q = q0
+    rp = rt - q @ (q.T @ rt)
+    return Projection(q, rp, float(rp @ rp), len(rt))
+
+
 def rss_over_grid(
     prob: Problem,
     fixed: list[np.ndarray],
@@ -140,22 +168,17 @@ def rss_over_grid(
     grid,
     poses,
     cache: bool = False,
+    proj: Projection | None = None,
 ) -> np.ndarray:
-    """Training RSS of geometry + ``fixed`` + candidate at each shape (unconstrained)."""
-    _, rt = prob.rows(poses)
-    q0, _ = prob.basis(poses)
-    if fixed:
-        xf = _flat(fixed, poses).reshape(len(rt), -1)
-        q = _orth(np.hstack([q0, xf - q0 @ (q0.T @ xf)]))
-    else:
-        q = q0
-    rp = rt - q @ (q.T @ rt)
-    base = float(rp @ rp)
-    if cache:
-        x_all = grid_designs(prob, cand, ctx, grid)[:, poses]
+    """Training RSS of geometry + ``fixed`` + candidate at each shape (unconstrained);
+    ``proj``: :func:`projection` of the same ``fixed`` and poses, if already computed."""
+    proj = projection(prob, fixed, poses) if proj is None else proj
+    q, rp, base = proj.q, proj.rp, proj.base
+    if cache:  # np.take: the rows of [:, poses], contiguous without a second copy
+        x_all = np.take(grid_designs(prob, cand, ctx, grid), np.flatnonzero(poses), axis=1)
     else:
         x_all = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
-    x_all = x_all.reshape(len(grid), len(rt), -1)  # (S, m, k)
+    x_all = x_all.reshape(len(grid), proj.m, -1)  # (S, m, k)
     out = np.empty(len(grid))
     for lo in range(0, len(grid), 64):
         x = x_all[lo : lo + 64]
@@ -176,7 +199,7 @@ def rss_over_grid(
     return out
 
 
-def _refine(prob, fixed, cand, ctx, grid, i, poses) -> float:
+def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = None) -> float:
     """Refine the shape between the grid neighbours of index ``i``."""
     s = float(grid[i])
     if cand.shape_name == "harmonic" or not np.isfinite(s) or len(grid) < 3:
@@ -190,7 +213,7 @@ def _refine(prob, fixed, cand, ctx, grid, i, poses) -> float:
 
     def cost(u: float) -> float:
         v = float(np.exp(u)) if cand.shape_log else u
-        return float(rss_over_grid(prob, fixed, cand, ctx, [v], poses)[0])
+        return float(rss_over_grid(prob, fixed, cand, ctx, [v], poses, proj=proj)[0])
 
     a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
     res = optimize.minimize_scalar(
@@ -206,11 +229,12 @@ def choose_shape(
     if not cand.shaped:
         return NO_SHAPE
     grid = np.asarray(cand.grid(ctx), dtype=float)
-    rss = rss_over_grid(prob, fixed, cand, ctx, grid, poses, cache=True)
+    proj = projection(prob, fixed, poses)
+    rss = rss_over_grid(prob, fixed, cand, ctx, grid, poses, cache=True, proj=proj)
     inner = np.ones(len(rss), bool)
     inner[1:-1] = (rss[1:-1] <= rss[:-2]) & (rss[1:-1] <= rss[2:])
     minima = [i for i in np.argsort(rss) if inner[i]][:N_FINALISTS]
-    finalists = [_refine(prob, fixed, cand, ctx, grid, i, poses) for i in minima]
+    finalists = [_refine(prob, fixed, cand, ctx, grid, i, poses, proj) for i in minima]
     if len(finalists) == 1:
         return finalists[0]
     idx = np.flatnonzero(poses)

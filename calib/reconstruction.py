@@ -19,6 +19,7 @@ import numpy as np
 
 from calib.exceptions import IdentifiabilityError
 from calib.identifiability import RANK_RTOL, scaled_jacobian
+from twin.kinematics_fast import on_one_blas_thread
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,7 @@ def _rank(a: np.ndarray, ref: float) -> int:
     return int(np.sum(s > RANK_RTOL * ref))
 
 
+@on_one_blas_thread  # one SVD of a few hundred by at most m columns per column tried
 def correlation_reconstruction(
     h: np.ndarray, names: tuple[str, ...] | list[str], xi: np.ndarray
 ) -> list[int]:

@@ -1,4 +1,5 @@
-"""Command line: ``python -m scenarios run NAME|PATH [--results DIR]``, ``list``, and
+"""Command line: ``python -m scenarios run NAME|PATH [--results DIR] [--no-record]
+[--no-figures]``, ``list``, and
 ``sweep NAME|PATH --seeds N [--over truth|noise|both] [--set key=v1,v2 ...] [--engine ray|local]``
 (Ray: a local instance, or the cluster RAY_ADDRESS names)."""
 
@@ -30,6 +31,11 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--quiet", action="store_true")
     run.add_argument("--view", action="store_true", help="open the rerun viewer as well")
     run.add_argument("--no-record", action="store_true", help="do not write the .rrd file")
+    run.add_argument(
+        "--no-figures",
+        action="store_true",
+        help="leave out the PNG figures (studies that support it; the numbers are the same)",
+    )
     sub.add_parser("list", help="list the scenarios shipped in scenarios/")
     sw = sub.add_parser(
         "sweep",
@@ -70,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
             quiet=args.quiet,
             view=args.view,
             record=not args.no_record,
+            figures=not args.no_figures,
         )
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)

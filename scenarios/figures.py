@@ -26,14 +26,16 @@ CMAP = "viridis"
 Panel = tuple[str, np.ndarray, np.ndarray]  # (name, xy_mm (N, 2), errors (N,))
 
 
-def save_png(fig: plt.Figure, path: Path) -> Path:
-    """Write ``fig`` to ``path`` atomically (a temporary sibling, then a rename), then close it."""
+def save_png(fig: plt.Figure, path: Path, close: bool = True) -> Path:
+    """Write ``fig`` to ``path`` atomically (a temporary sibling, then a rename), then close it
+    (``close=False``: keep it open, to be drawn again with other data)."""
     try:
         return write_with_atomic(
             path, lambda tmp: fig.savefig(tmp, dpi=DPI, format="png"), suffix=".png.tmp"
         )
     finally:
-        plt.close(fig)
+        if close:
+            plt.close(fig)
 
 
 def _finite_max(values: np.ndarray) -> float:
@@ -161,14 +163,22 @@ def parameter_bars_png(
     est = np.asarray(estimates, dtype=float)
     if est.shape != (n,):
         raise ValueError(f"{n} parameter names but estimates of shape {est.shape}")
-    fig, ax = plt.subplots(figsize=(7.5, 1.4 + 0.19 * n), constrained_layout=True)
+    fontsize = 7 if n <= 60 else 6
+    width, height = 7.5, 1.4 + 0.19 * n
+    fig, ax = plt.subplots(figsize=(width, height))
+    # fixed margins (inches) instead of a layout engine, which draws the figure once more:
+    # the names' column from their longest (about 0.6 em a character), title and x label
+    name_in = 0.25 + 0.6 * fontsize / 72 * max((len(str(v)) for v in names), default=1)
+    fig.subplots_adjust(
+        left=name_in / width, right=1 - 0.15 / width, top=1 - 0.35 / height, bottom=0.55 / height
+    )
     y = np.arange(n)
     err = None if std is None else 2.0 * np.nan_to_num(np.asarray(std, dtype=float))
     label = "estimate" if std is None else "estimate ± 2 std"
     ax.barh(y, est, xerr=err, color="#4c78a8", ecolor="#333333", capsize=2, label=label)
     if truth is not None:
         ax.plot(truth, y, "D", color="#e45756", markersize=3.5, label="truth")
-    ax.set_yticks(y, names, fontsize=7 if n <= 60 else 6)
+    ax.set_yticks(y, names, fontsize=fontsize)
     ax.set_ylim(n - 0.5, -0.5)
     ax.axvline(0.0, color="#999999", linewidth=0.6)
     ax.grid(axis="x", alpha=0.3)

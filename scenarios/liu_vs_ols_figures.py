@@ -38,17 +38,12 @@ def _layers(maps: dict[str, dict[str, Any]]) -> list[tuple[str, float]]:
     return sorted(out, key=lambda gz: -gz[1])
 
 
-def _figure(path: Path, maps: dict[str, dict[str, Any]], qty: str) -> None:
+def _panels(maps: dict[str, dict[str, Any]], qty: str):
+    """(row, column, title, image, extent, max) of every panel of one quantity."""
     rows = _layers(maps)
     stages = [s for s in SHOWN if all(s in maps[g] for g, _ in rows)]
-    fig, axes = plt.subplots(
-        len(rows),
-        len(stages),
-        figsize=(2.3 * len(stages), 2.2 * len(rows) + 0.4),
-        squeeze=False,
-    )
-    fig.subplots_adjust(left=0.04, right=0.99, bottom=0.05, top=0.88, wspace=0.3, hspace=0.55)
     unit = "mm" if qty == "position" else "deg"
+    out = []
     for r, (group, z) in enumerate(rows):
         for c, stage in enumerate(stages):
             poses, errs = maps[group][stage]
@@ -57,27 +52,58 @@ def _figure(path: Path, maps: dict[str, dict[str, Any]], qty: str) -> None:
             if qty != "position":
                 values = np.degrees(values)
             img, extent = _grid(poses[sel, :2] * 1e3, values)
-            ax = axes[r, c]
-            ax.imshow(img, origin="lower", extent=extent, cmap="viridis", vmin=0)
-            ax.set_title(
+            title = (
                 f"{stage}, z {z * 1e3:+.0f} mm ({group})\n"
-                f"max {values.max():.3f}, mean {values.mean():.3f} {unit}",
-                fontsize=7,
+                f"max {values.max():.3f}, mean {values.mean():.3f} {unit}"
             )
-            ax.tick_params(labelsize=6)
-    fig.suptitle(
+            out.append((r, c, title, img, extent, float(np.nanmax(img))))
+    return len(rows), len(stages), out
+
+
+def _suptitle(qty: str) -> str:
+    unit = "mm" if qty == "position" else "deg"
+    return (
         f"polisher: {qty} error of the head at every node ({unit}); each panel scaled from 0 "
-        "(dark) to its own max (yellow)",
-        fontsize=9,
+        "(dark) to its own max (yellow)"
     )
-    save_png(fig, path)
 
 
 def write_figures(out_dir: Path, maps: dict[str, dict[str, Any]]) -> dict[str, str]:
-    """maps[group][stage] = (poses (N, 6), PoseErrors); one PNG per quantity."""
+    """maps[group][stage] = (poses (N, 6), PoseErrors); one PNG per quantity.
+
+    The grid of panels is laid out once and drawn for each quantity with its images and
+    titles replaced (every layer spans the same x and y, so the panels share their axes and
+    only the outer ones carry tick labels)."""
     written: dict[str, str] = {}
-    for qty in ("position", "orientation"):
-        name = f"error_maps_{qty}.png"
-        _figure(out_dir / name, maps, qty)
-        written[f"error_maps_{qty}"] = name
+    n_rows, n_cols, panels = _panels(maps, "position")
+    fig, axes = plt.subplots(
+        n_rows,
+        n_cols,
+        figsize=(2.3 * n_cols, 2.2 * n_rows + 0.4),
+        squeeze=False,
+        sharex=True,
+        sharey=True,
+    )
+    fig.subplots_adjust(left=0.04, right=0.99, bottom=0.05, top=0.88, wspace=0.3, hspace=0.55)
+    images = {}
+    for r, c, _, img, extent, _vmax in panels:
+        ax = axes[r, c]
+        images[r, c] = ax.imshow(img, origin="lower", extent=extent, cmap="viridis", vmin=0)
+        ax.tick_params(labelsize=6)
+    heading = fig.suptitle("", fontsize=9)
+    try:
+        for qty in ("position", "orientation"):
+            if qty != "position":
+                _, _, panels = _panels(maps, qty)
+            for r, c, title, img, extent, vmax in panels:
+                images[r, c].set_data(img)
+                images[r, c].set_extent(extent)
+                images[r, c].set_clim(0, vmax)
+                axes[r, c].set_title(title, fontsize=7)
+            heading.set_text(_suptitle(qty))
+            name = f"error_maps_{qty}.png"
+            save_png(fig, out_dir / name, close=False)
+            written[f"error_maps_{qty}"] = name
+    finally:
+        plt.close(fig)
     return written

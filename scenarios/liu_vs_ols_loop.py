@@ -22,6 +22,7 @@ from calib.loop_compensation import loop_commands
 from calib.loop_effect import ActuatorCorrection, diagnosed_correction
 from calib.loop_fit import LoopFit, fit_with_effect, residual_rms_3d
 from scenarios.liu_vs_ols_pipeline import Bench, Calibration
+from twin.kinematics_fast import on_one_blas_thread
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,7 @@ def fine_result(bench: Bench, cal: Calibration, values: np.ndarray) -> Identific
     )
 
 
+@on_one_blas_thread  # small matrices throughout (at most 294 x 57)
 def close_loop(bench: Bench, cal: Calibration, estimator: str = "ols") -> Loop:
     model = bench.model
     values = cal.estimates[estimator][1]

@@ -7,6 +7,7 @@ and the nominal model. Scoring uses ``bench.true_targets`` (where the targets re
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,9 +22,10 @@ from calib.scoring import PoseErrors, max_mean_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
 from twin.kinematics_batch import forward_batch
+from twin.kinematics_fast import one_blas_thread
 from twin.measurement import measure as twin_measure
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import commands_for_poses, layer_poses
+from twin.workspace import checked_commands, commands_for_poses, layer_poses
 
 # First paper, Table 5 (experiment, "pose errors after calibration in three measurement
 # layers") and section 5 (simulation).
@@ -143,15 +145,22 @@ def estimator_label(entry: str | dict[str, Any]) -> str:
     return entry if isinstance(entry, str) else entry["label"]
 
 
-def run_estimators(problem: FineProblem, entries: list) -> dict[str, tuple[LinearEstimate, Any]]:
-    """Each entry: "ols", or a table {label = "liu_k1", method = "liu", k = 1.0}."""
+def run_estimators(
+    problem: FineProblem, entries: list, keep_blas: tuple[str, ...] = ()
+) -> dict[str, tuple[LinearEstimate, Any]]:
+    """Each entry: "ols", or a table {label = "liu_k1", method = "liu", k = 1.0}.
+
+    Each runs on one BLAS thread (small matrices), except the labels in ``keep_blas``, which
+    keep the caller's BLAS setting (see :func:`calibrate`)."""
     out = {}
     for entry in entries:
-        if isinstance(entry, str):
-            out[entry] = estimate(problem, entry)
-        else:
-            opts = {k: v for k, v in entry.items() if k not in ("label", "method")}
-            out[entry["label"]] = estimate(problem, entry["method"], **opts)
+        label = estimator_label(entry)
+        with contextlib.nullcontext() if label in keep_blas else one_blas_thread():
+            if isinstance(entry, str):
+                out[entry] = estimate(problem, entry)
+            else:
+                opts = {k: v for k, v in entry.items() if k not in ("label", "method")}
+                out[label] = estimate(problem, entry["method"], **opts)
     return out
 
 
@@ -162,13 +171,18 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
     fine_nodes = sc.get("fine.nodes_per_side", int)
     if progress is not None:
         progress.step(f"coarse calibration: middle layer, {coarse_nodes} x {coarse_nodes} nodes")
-    coarse = coarse_calibration(
-        bench.model,
-        bench.encoder,
-        bench.poses("coarse", coarse_nodes),
-        bench.measure,
-        rel_tol=sc.get("coarse.rel_tol", float, 0.05),
-    )
+    # the coarse and fine problems and the estimators on one BLAS thread (small matrices),
+    # except the estimator the loop starts from: it keeps the caller's BLAS setting, since
+    # the loop's refit turns the last bits of its start (1e-12 relative between one and two
+    # threads) into 1e-9..1e-6 relative changes of the effect's coefficients
+    with one_blas_thread():
+        coarse = coarse_calibration(
+            bench.model,
+            bench.encoder,
+            bench.poses("coarse", coarse_nodes),
+            bench.measure,
+            rel_tol=sc.get("coarse.rel_tol", float, 0.05),
+        )
     if progress is not None:
         progress.note(
             f"{coarse.iterations} rounds, relative changes "
@@ -186,11 +200,12 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
         seen.append((np.array(commands), readings))
         return readings
 
-    problem = fine_problem(bench.model, coarse.values, bench.encoder, fine_poses, measure)
+    with one_blas_thread():
+        problem = fine_problem(bench.model, coarse.values, bench.encoder, fine_poses, measure)
     ((cmds, readings),) = seen
-    return Calibration(
-        coarse, fine_poses, order, cmds, readings, problem, run_estimators(problem, entries)
-    )
+    loop_estimator = sc.get("loop.estimator", str, "ols")
+    estimates = run_estimators(problem, entries, keep_blas=(loop_estimator,))
+    return Calibration(coarse, fine_poses, order, cmds, readings, problem, estimates)
 
 
 def twist_compensated_many(
@@ -210,16 +225,20 @@ def twist_compensated_many(
 def stage_commands(
     bench: Bench, cal: Calibration, poses: np.ndarray, stages: list[str] | None = None
 ) -> dict[str, np.ndarray]:
-    """Commands of every stage for ``poses``: uncalibrated, coarse, each estimator (Eq. 16)."""
+    """Commands of every stage for ``poses``: uncalibrated, coarse, each estimator (Eq. 16).
+
+    The coarse commands are the first inverse kinematics of Eq. 16's preparation (the same
+    solves, pose after pose from the home configuration, on the same model), checked against
+    the workspace and the strokes as :func:`twin.workspace.commands_for_poses` does."""
     nominal = bench.machine.nominal
+    comp = TwistCompensation.prepare(bench.model, cal.coarse.values, poses)
+    coarse_mech = bench.model.mechanism(cal.coarse.values)
     out = {
         "uncalibrated": commands_for_poses(nominal, poses),  # before any calibration
-        "coarse": commands_for_poses(bench.model.mechanism(cal.coarse.values), poses),
+        "coarse": checked_commands(coarse_mech, poses, comp.qpos[:, coarse_mech.actuator_qpos]),
     }
     deltas = {m: est.x for m, (est, _) in cal.estimates.items() if stages is None or m in stages}
-    out.update(
-        twist_compensated_many(bench.model, cal.coarse.values, deltas, cal.problem.columns, poses)
-    )
+    out.update({m: comp.commands(delta, cal.problem.columns) for m, delta in deltas.items()})
     return out
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import inspect
 import os
 import secrets
 import shutil
@@ -112,18 +113,25 @@ def run_scenario(
     quiet: bool = False,
     view: bool = False,
     record: bool = True,
+    figures: bool = True,
 ) -> tuple[dict[str, Any], Path]:
     """Run one scenario; returns its summary and its output folder ``<results_root>/<name>``.
 
     The scenario is loaded and validated before anything runs. The rerun recording goes to
-    ``<out>/<name>.rrd`` (``record``); ``view`` also opens the viewer. The folder is replaced
-    whole or not at all (see :func:`replaced_whole`); Ctrl-C raises :class:`RunInterrupted`."""
+    ``<out>/<name>.rrd`` (``record``); ``view`` also opens the viewer. ``figures=False`` asks
+    the study to leave out its PNG figures (the studies whose ``run`` takes a ``figures``
+    argument honour it; the numbers of the summary are the same either way). The folder is
+    replaced whole or not at all (see :func:`replaced_whole`); Ctrl-C raises
+    :class:`RunInterrupted`."""
     scenario = load_scenario(name_or_path)
     if scenario.study not in STUDIES:
         raise ScenarioError(
             f"{scenario.path}: unknown study '{scenario.study}'; known: {sorted(STUDIES)}"
         )
     run, report = _study(scenario.study)
+    options = (
+        {} if figures or "figures" not in inspect.signature(run).parameters else {"figures": False}
+    )
     out_dir = Path(results_root or REPO_ROOT / "results") / scenario.name
     progress = Progress(scenario.name, quiet=quiet)
     try:
@@ -131,7 +139,7 @@ def run_scenario(
             rrd = work / f"{scenario.name}.rrd" if record else None
             with Recorder(rrd, f"pkm-calib-{scenario.name}", spawn_viewer=view) as recorder:
                 recorder.send_blueprint()
-                summary = run(scenario, work, progress, recorder)
+                summary = run(scenario, work, progress, recorder, **options)
             if rrd is not None:
                 summary["recording"] = rrd.name
             write_json_atomic(work / "summary.json", summary)

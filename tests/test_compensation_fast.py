@@ -14,12 +14,13 @@ import pytest
 
 from calib.compensation import TwistCompensation, twist_compensated_commands
 from calib.model import CalibrationModel
+from twin.exceptions import WorkspaceError
 from twin.kinematics import inverse
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
 from twin.sensitivity import tool_twist_jacobian
-from twin.workspace import layer_poses
+from twin.workspace import checked_commands, commands_for_poses, layer_poses
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -76,3 +77,17 @@ def test_zero_estimate_gives_the_controllers_own_commands(polisher):
     np.testing.assert_allclose(
         prepared.commands(np.zeros(len(columns)), columns), plain, atol=1e-12
     )
+
+
+def test_prepared_inverse_kinematics_are_the_controllers_commands(polisher):
+    """liu_vs_ols takes the coarse stage's commands from the preparation: they must be
+    commands_for_poses' own, bit for bit, and pass its checks (checked_commands)."""
+    model, base, poses, _, _ = polisher
+    mech = model.mechanism(base)
+    prepared = TwistCompensation.prepare(model, base, poses)
+    from_prep = checked_commands(mech, poses, prepared.qpos[:, mech.actuator_qpos])
+    np.testing.assert_array_equal(from_prep, commands_for_poses(mech, poses))
+    far = np.array(poses)
+    far[2, 0] = 10.0  # 10 m: outside the box
+    with pytest.raises(WorkspaceError, match="pose 2"):
+        checked_commands(mech, far, from_prep)

@@ -337,3 +337,30 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def test_no_figures_reaches_the_studies_that_take_it(tmp_path, monkeypatch, capsys):
+    """``figures=False`` (``--no-figures``) is passed to a study whose run takes ``figures``,
+    and a study without that argument runs as before."""
+    seen = []
+
+    def with_switch(scenario, out_dir, progress, recorder, figures=True):
+        seen.append(figures)
+        return {"scenario": scenario.name}
+
+    def without_switch(scenario, out_dir, progress, recorder):
+        seen.append("plain")
+        return {"scenario": scenario.name}
+
+    report = lambda s: f"# {s['scenario']}\n"  # noqa: E731
+    monkeypatch.setattr(runner, "_study", lambda name: (with_switch, report))
+    run_scenario("undeclared_effect", tmp_path, quiet=True, record=False, figures=False)
+    run_scenario("undeclared_effect", tmp_path, quiet=True, record=False)
+    monkeypatch.chdir(tmp_path.parent)
+    assert (
+        cli(["run", "undeclared_effect", "--results", str(tmp_path), "--quiet", "--no-figures"])
+        == 0
+    )
+    monkeypatch.setattr(runner, "_study", lambda name: (without_switch, report))
+    run_scenario("undeclared_effect", tmp_path, quiet=True, record=False, figures=False)
+    assert seen == [False, True, False, "plain"]

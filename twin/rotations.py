@@ -10,6 +10,8 @@ Names read ``a_from_b``: ``matrix_from_rotvec`` turns a rotation vector into a m
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -38,9 +40,62 @@ def matrix_from_rotvec(rotvec: ArrayLike) -> Array:
     return np.eye(3) + a * k + b * (k @ k)
 
 
+SMALL_BATCH = 8  # up to this many matrices, rotvec_from_matrix works on Python floats
+
+
 def rotvec_from_matrix(matrix: ArrayLike) -> Array:
-    """Inverse of :func:`matrix_from_rotvec` (angle in [0, pi])."""
+    """Inverse of :func:`matrix_from_rotvec` (angle in [0, pi]).
+
+    A few matrices (a tool goal, a machine's closures: the Newton loops of the kinematics
+    call this at every step) go through :func:`_rotvec_one`, the same arithmetic on Python
+    floats in the same order, so the same numbers bit for bit without numpy's per-call
+    overhead (tests/test_rotations.py compares both paths)."""
     r = np.asarray(matrix, dtype=float)
+    if r.shape == (3, 3):
+        out = _rotvec_one(r.tolist())
+        if out is not None:
+            return np.array(out)
+    elif r.ndim == 3 and r.shape[1:] == (3, 3) and 0 < r.shape[0] <= SMALL_BATCH:
+        rows = [_rotvec_one(m) for m in r.tolist()]
+        if all(row is not None for row in rows):
+            return np.array(rows)
+    return _rotvec_from_matrix_array(r)
+
+
+def _rotvec_one(m: list[list[float]]) -> list[float] | None:
+    """:func:`quat_from_matrix` then :func:`_rotvec_from_matrix_array` for one matrix (nested
+    lists), operation by operation; None for a matrix with NaN (left to the array path)."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = m
+    diag = (m00 + m11 + m22, m00, m11, m22)
+    if any(d != d for d in diag):
+        return None
+    best = 0
+    for i in (1, 2, 3):  # np.argmax: the first largest
+        if diag[i] > diag[best]:
+            best = i
+    if best == 0:
+        q = [1 + m00 + m11 + m22, m21 - m12, m02 - m20, m10 - m01]
+    elif best == 1:
+        q = [m21 - m12, 1 + m00 - m11 - m22, m01 + m10, m02 + m20]
+    elif best == 2:
+        q = [m02 - m20, m01 + m10, 1 - m00 + m11 - m22, m12 + m21]
+    else:
+        q = [m10 - m01, m02 + m20, m12 + m21, 1 - m00 - m11 + m22]
+    norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q = [c / norm for c in q]
+    if q[0] < 0:
+        q = [-c for c in q]
+    w = min(max(q[0], -1.0), 1.0)
+    v = q[1:]
+    sin_half = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if sin_half < 1e-12:
+        scale = 2.0 / (1.0 if w == 0 else w)
+    else:
+        scale = float(2.0 * np.arctan2(sin_half, w)) / sin_half  # numpy's arctan2, as below
+    return [c * scale for c in v]
+
+
+def _rotvec_from_matrix_array(r: Array) -> Array:
     quat = quat_from_matrix(r)
     w = np.clip(quat[..., 0], -1.0, 1.0)
     v = quat[..., 1:]

@@ -120,6 +120,30 @@ def commands_for_poses(
     return out
 
 
+def checked_commands(
+    mech: Mechanism, poses: np.ndarray, commands: np.ndarray, labels: Sequence[object] | None = None
+) -> np.ndarray:
+    """The checks of :func:`commands_for_poses` on commands already solved for ``poses`` (by
+    the same inverse kinematics elsewhere): each pose in the box, each command in its stroke;
+    errors name the pose. Returns the commands (N, A)."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    commands = np.atleast_2d(np.asarray(commands, dtype=float))
+    _check_labels(labels, len(poses))
+    if commands.shape != (len(poses), mech.n_actuators):
+        raise WorkspaceError(
+            f"expected {len(poses)} x {mech.n_actuators} commands, got shape {commands.shape}"
+        )
+    for i, (p, c) in enumerate(zip(poses, commands, strict=True)):
+        try:
+            check_pose_in_box(mech, p)
+            problem = stroke_problem(mech, c)
+            if problem:
+                raise WorkspaceError(f"not reachable: {problem}")
+        except WorkspaceError as exc:
+            raise WorkspaceError(f"{_pose_name(i, labels)}: {exc}") from None
+    return commands
+
+
 def random_poses(
     mech: Mechanism, n: int, rng: np.random.Generator, max_draws: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
