@@ -24,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from calib.compensation import TwistCompensation
 from calib.estimators.registry import make_estimator
 from calib.nominal_targets import nominal_targets
+from calib.orientation_reach import orientation_reach
 from scenarios.config import Scenario
 from scenarios.liu_vs_ols_loop import close_loop
 from scenarios.liu_vs_ols_pipeline import (
@@ -41,6 +43,7 @@ from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics_batch import forward_batch
 from twin.kinematics_fast import one_blas_thread
+from twin.parameters import KINDS, ParameterSet
 
 # Tolerances of the paper match (ours / paper, on all three layers as Table 5 reports them):
 # the rows that do not depend on the estimator, coarse and OLS, position max and mean.
@@ -96,6 +99,31 @@ def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) 
     return spread
 
 
+def orientation_check(
+    twists: np.ndarray, params: ParameterSet, layers: dict[str, dict[str, dict[str, float]]]
+) -> dict[str, Any]:
+    """Can the orientation rows come from the machine? Each source error's rotation of the
+    head per millimetre it moves P (the controller's model at the test layer's poses), beside
+    the orientation / position ratio of each row, ours and the paper's (all three layers)."""
+    reach = orientation_reach(
+        twists, list(params.names), params.kind == KINDS.index("joint_zero")
+    ).as_dict()
+    rows = {}
+    for stage, paper in PAPER["table5"].items():
+        ours = layers["all"].get(stage)
+        rows[stage] = {
+            "paper_max_deg_per_mm": paper["ori_max_deg"] / paper["pos_max_mm"],
+            "paper_mean_deg_per_mm": paper["ori_mean_deg"] / paper["pos_mean_mm"],
+            "ours_max_deg_per_mm": None
+            if ours is None
+            else ours["ori_max_deg"] / ours["pos_max_mm"],
+            "ours_mean_deg_per_mm": (
+                None if ours is None else ours["ori_mean_deg"] / ours["pos_mean_mm"]
+            ),
+        }
+    return {**reach, "rows": rows}
+
+
 DRAW_STUDY = "liu_vs_ols_draws"  # its results beside this scenario's, under the same root
 
 
@@ -145,9 +173,12 @@ def run(
         "scoring.nodes_per_side", int, scenario.get("fine.nodes_per_side", int)
     )
     poses = {g: bench.poses(g, score_nodes) for g in ("calibration", "test")}
+    comps = {
+        g: TwistCompensation.prepare(bench.model, cal.coarse.values, p) for g, p in poses.items()
+    }
     cmds: dict[str, dict[str, Any]] = {}
     for group, p in poses.items():
-        cmds[group] = stage_commands(bench, cal, p)
+        cmds[group] = stage_commands(bench, cal, p, comp=comps[group])
         cmds[group]["loop"] = lambda order, p=p: loop.commands(bench, p, order)
     with one_blas_thread():
         layers, maps = score(bench, poses, cmds)
@@ -209,6 +240,7 @@ def run(
         "sigma_liu": sigma_liu,
         "layers": layers,
         "paper_match": paper_match(layers),
+        "orientation_reach": orientation_check(comps["test"].twist_jacobians, params, layers),
         "loop": loop.summary(),
         "draws": draws_reference(out_dir),
         "estimators": {

@@ -208,30 +208,22 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
     return Calibration(coarse, fine_poses, order, cmds, readings, problem, estimates)
 
 
-def twist_compensated_many(
-    model: CalibrationModel,
-    base_values: np.ndarray,
-    deltas: dict[str, np.ndarray],
-    columns: np.ndarray,
-    poses: np.ndarray,
-) -> dict[str, np.ndarray]:
-    """Eq. (16) for several estimates at once: :func:`calib.compensation.
-    twist_compensated_commands` with the inverse kinematics of each nominal pose and its B
-    computed once and shared by every estimate (the same numbers, less work)."""
-    comp = TwistCompensation.prepare(model, base_values, poses)
-    return {m: comp.commands(delta, columns) for m, delta in deltas.items()}
-
-
 def stage_commands(
-    bench: Bench, cal: Calibration, poses: np.ndarray, stages: list[str] | None = None
+    bench: Bench,
+    cal: Calibration,
+    poses: np.ndarray,
+    stages: list[str] | None = None,
+    comp: TwistCompensation | None = None,
 ) -> dict[str, np.ndarray]:
     """Commands of every stage for ``poses``: uncalibrated, coarse, each estimator (Eq. 16).
 
-    The coarse commands are the first inverse kinematics of Eq. 16's preparation (the same
-    solves, pose after pose from the home configuration, on the same model), checked against
-    the workspace and the strokes as :func:`twin.workspace.commands_for_poses` does."""
+    ``comp``: Eq. 16's preparation of ``poses`` on the coarse model, when the caller has it.
+    The coarse commands are its first inverse kinematics (the same solves, pose after pose
+    from the home configuration, on the same model), checked against the workspace and the
+    strokes as :func:`twin.workspace.commands_for_poses` does."""
     nominal = bench.machine.nominal
-    comp = TwistCompensation.prepare(bench.model, cal.coarse.values, poses)
+    if comp is None:
+        comp = TwistCompensation.prepare(bench.model, cal.coarse.values, poses)
     coarse_mech = bench.model.mechanism(cal.coarse.values)
     out = {
         "uncalibrated": commands_for_poses(nominal, poses),  # before any calibration
