@@ -128,8 +128,7 @@ class KinematicStructure:
             home = mech.home_qpos[:, None].copy()
             frames = tree_frames(self.tree, mech.model, home)
             pos = frames.site_positions(mech.model, self.closure.sites)
-            rhs = np.zeros((mech.n_closure, 1, 1))
-            self.closure.order_rows(self.closure.matrices(frames, pos, rhs))
+            self.closure.order_rows(frames, pos)
         self.out_sites = np.concatenate([[mech.tool_site], mech.target_sites]).astype(int)
         m = mech.model
         free = mech.free_dofs()

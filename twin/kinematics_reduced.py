@@ -26,6 +26,14 @@ import numpy as np
 
 from twin.kinematics_tree import FREE, HINGE, TreeFrames, as_index
 from twin.mechanism import Mechanism
+from twin.small_systems import (  # noqa: F401 (eliminate_static: tests replace it here)
+    back_substitute,
+    eliminate,
+    eliminate_static,
+    pivot_order,
+    solve_dense,
+    solve_square,
+)
 
 BALL = int(mujoco.mjtJoint.mjJNT_BALL)
 AXIS_JOINT, AXIS_WORLD, AXIS_BODY = 0, 1, 2  # a dof's axis: joint xaxis, world e_k, body column
@@ -148,6 +156,7 @@ class ClosureStructure:
         # row order of each closure's equations in its matrix: the static pivots of the
         # elimination (ClosureStructure.order_rows); the identity until chosen
         self.rank = [np.tile(np.arange(g.rows), (len(g.closures), 1)) for g in self.groups]
+        self.reduced_order = np.arange(len(self.shared))  # the reduced system's, likewise
         self.square = fits and nf == self.n_closure
         shared_pos = -np.ones(nf, dtype=int)
         shared_pos[self.shared] = np.arange(len(self.shared))
@@ -269,19 +278,23 @@ class ClosureStructure:
             lever = lever - site_pos[:, ec.site_b]
         return np.concatenate([cross_soa(w, lever), (ec.ma - ec.mb) * w])
 
-    def order_rows(self, mats: list[np.ndarray]) -> None:
-        """Choose each closure's static pivot rows by partial pivoting on one configuration's
-        matrices (from :meth:`matrices` with the identity order, N = 1)."""
+    def order_rows(self, frames: TreeFrames, site_pos: np.ndarray) -> None:
+        """Choose the static pivots at one configuration (``frames`` of N = 1, e.g. home):
+        each closure's rows by partial pivoting on its private columns, then the rows of the
+        square reduced system by partial pivoting on it."""
+        rhs = np.zeros((self.n_closure, 1, 1))
+        mats = self.matrices(frames, site_pos, rhs)
         for g, (grp, mat) in enumerate(zip(self.groups, mats, strict=True)):
             for slot in range(len(grp.closures)):
-                a = np.array(mat[:, : grp.k, slot, 0])
-                order = list(range(grp.rows))
-                for j in range(grp.k):
-                    p = j + int(np.argmax(np.abs(a[j:, j])))
-                    a[[j, p]], order[j], order[p] = a[[p, j]], order[p], order[j]
-                    if a[j, j] != 0.0:
-                        a[j + 1 :] -= np.outer(a[j + 1 :, j] / a[j, j], a[j])
+                order = pivot_order(mat[:, : grp.k, slot, 0], grp.k)
                 self.rank[g][slot, order] = np.arange(grp.rows)
+        s = len(self.shared)
+        if self.square and s:
+            mats = self.matrices(frames, site_pos, rhs)
+            self.eliminate_groups(mats)
+            red = self._reduced(mats)
+            if red.shape[0] == s:
+                self.reduced_order = pivot_order(red[:, :s, 0], s)
 
     def eliminate_groups(self, mats: list[np.ndarray]) -> None:
         """Eliminate every closure's private columns, in place on ``matrices``' output:
@@ -299,25 +312,28 @@ class ClosureStructure:
             else:
                 eliminate(flat, g.k)
 
+    def _reduced(self, mats: list[np.ndarray]) -> np.ndarray:
+        """The reduced rows (rows after elimination, s + m, N) over the shared columns."""
+        n = mats[0].shape[-1]
+        reduced = []
+        for g, mat in zip(self.groups, mats, strict=True):
+            red = mat[g.k :, g.k :]  # (rows - k, s + m, G, N)
+            reduced.append(np.moveaxis(red, 2, 1).reshape(-1, red.shape[1], n))
+        return np.concatenate(reduced)
+
     def solve(self, mats: list[np.ndarray]) -> np.ndarray:
-        """Solutions (n_free, m, N) of the systems ``matrices`` assembled (in place on them)."""
+        """Solutions (n_free, m, N) of the systems ``matrices`` assembled (in place on them):
+        square reduced systems by static pivots (Householder where one is refused), others
+        by Householder (least squares)."""
         s = len(self.shared)
         n = mats[0].shape[-1]
         m_rhs = mats[0].shape[1] - self.groups[0].k - s
         self.eliminate_groups(mats)
-        reduced = []
-        for g, mat in zip(self.groups, mats, strict=True):
-            red = mat[g.k :, g.k :]  # (rows - k, s + m, G, N)
-            reduced.append(np.moveaxis(red, 2, 1).reshape(-1, s + m_rhs, n))
         out = np.empty((len(self.free), m_rhs, n))
         if s:
-            red = np.concatenate(reduced)
-            if red.shape[0] == s:  # square: LAPACK's pivoted solve, one per configuration
-                x_s = np.moveaxis(
-                    np.linalg.solve(np.moveaxis(red[:, :s], -1, 0), np.moveaxis(red[:, s:], -1, 0)),
-                    0,
-                    -1,
-                )
+            red = self._reduced(mats)
+            if red.shape[0] == s:
+                x_s = solve_square(red[self.reduced_order])
             else:
                 x_s = solve_dense(red, s)
             out[self.shared] = x_s
@@ -342,61 +358,3 @@ def cross_soa(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack(
         [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
     )
-
-
-def eliminate(mat: np.ndarray, k: int) -> None:
-    """Householder reflections on the first ``k`` columns of ``mat`` (rows, cols, L), in
-    place, independently for each of the L systems: the first k rows become upper triangular
-    (with their right-hand columns), the others the reduced rows (an orthonormal basis of the
-    complement of those k columns applied to the rest, so least squares is preserved)."""
-    rows = mat.shape[0]
-    for j in range(min(k, rows)):
-        x = mat[j:, j]  # (rows - j, L)
-        norm = np.sqrt(np.einsum("rl,rl->l", x, x))
-        alpha = np.where(x[0] > 0, -norm, norm)  # reflect away from x0: no cancellation
-        v = x.copy()
-        v[0] -= alpha
-        vtv = 2.0 * norm * (norm + np.abs(x[0]))  # |x - alpha e1|^2
-        beta = np.where(vtv > 0, 2.0 / np.where(vtv > 0, vtv, 1.0), 0.0)
-        if j + 1 < mat.shape[1]:
-            rest = mat[j:, j + 1 :]
-            w = np.einsum("rl,rcl->cl", v, rest) * beta
-            rest -= v[:, None] * w[None]
-        mat[j, j] = alpha
-        mat[j + 1 :, j] = 0.0
-
-
-def eliminate_static(mat: np.ndarray, k: int, threshold: float = 0.1) -> np.ndarray:
-    """Gaussian elimination of the first ``k`` columns of ``mat`` (rows, cols, L) in place,
-    pivots on the diagonal (the rows already ordered), independently for each of the L
-    systems; returns which systems had every pivot at least ``threshold`` times the largest
-    entry below it (threshold pivoting: bounded growth). The others must be redone."""
-    ok = np.ones(mat.shape[-1], dtype=bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for j in range(k):
-            col = np.abs(mat[j:, j])
-            piv = col[0]
-            ok &= (piv > 0) & (piv >= threshold * np.max(col, axis=0))
-            if j + 1 < mat.shape[0]:
-                factor = mat[j + 1 :, j] / mat[j, j]
-                mat[j + 1 :, j + 1 :] -= factor[:, None] * mat[j, None, j + 1 :]
-                mat[j + 1 :, j] = 0.0
-    return ok
-
-
-def back_substitute(u: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """x with u x = rhs for upper-triangular u (k, k, L) and rhs (k, m, L)."""
-    k = u.shape[0]
-    x = np.empty_like(rhs)
-    for i in range(k - 1, -1, -1):
-        acc = rhs[i] - np.einsum("tl,tml->ml", u[i, i + 1 :], x[i + 1 :]) if i < k - 1 else rhs[i]
-        x[i] = acc / u[i, i]
-    return x
-
-
-def solve_dense(mat: np.ndarray, s: int) -> np.ndarray:
-    """Solve the systems [A | B] (R, s + m, N) for X (s, m, N): A X = B, in the
-    least-squares sense when R > s (Householder, then back substitution)."""
-    mat = np.array(mat)
-    eliminate(mat, s)
-    return back_substitute(mat[:s, :s], mat[:s, s:])
