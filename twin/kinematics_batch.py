@@ -196,25 +196,15 @@ def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: n
     return it
 
 
-def _subset(frames: TreeFrames, mask: np.ndarray) -> TreeFrames:
-    """The frames of the configurations ``mask`` selects."""
-    return TreeFrames(
-        frames.xpos[..., mask],
-        frames.xmat[..., mask],
-        frames.xanchor[..., mask],
-        frames.xaxis[..., mask],
-    )
-
-
 def _store(
     fk: FastKinematics, frames: TreeFrames, out: np.ndarray, done: np.ndarray, active: np.ndarray
 ) -> None:
     """Tool and target frames of the poses that are done (``done`` over ``active``) into
     ``out`` (3, 4, S, N): column 0 the sites' positions, columns 1-3 the tool's rotation."""
-    sub = _subset(frames, done) if not np.all(done) else frames
+    part = None if np.all(done) else done
     m = fk.model
     ids = active[done]
-    pos = sub.site_positions(m, fk.out_sites)  # (3, S, k)
+    pos = frames.site_positions(m, fk.out_sites, part)  # (3, S, k)
     out[:, 0, :, ids] = np.moveaxis(pos, -1, 0)
-    rot = sub.site_rotations(m, fk.out_sites[:1])  # (3, 3, 1, k)
+    rot = frames.site_rotations(m, fk.out_sites[:1], part)  # (3, 3, 1, k)
     out[:, 1:, 0, ids] = rot[:, :, 0]

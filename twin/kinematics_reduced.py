@@ -269,14 +269,19 @@ class ClosureStructure:
     ) -> np.ndarray:
         """Linear rows (and angular rows of rotational dofs) of one entry class, (3|6, E, N)."""
         w = axes[:, ec.dof]
+        sign = ec.ma - ec.mb
         if not ec.rot:
-            return (ec.ma - ec.mb) * w
-        lever = -(ec.ma - ec.mb) * anchors[:, ec.dof]
-        if ec.ma:
-            lever = lever + site_pos[:, ec.site_a]
-        if ec.mb:
-            lever = lever - site_pos[:, ec.site_b]
-        return np.concatenate([cross_soa(w, lever), (ec.ma - ec.mb) * w])
+            return w if sign == 1.0 else sign * w
+        if ec.ma and ec.mb:
+            lever = site_pos[:, ec.site_a] - site_pos[:, ec.site_b]
+        else:
+            lever = site_pos[:, ec.site_a if ec.ma else ec.site_b] - anchors[:, ec.dof]
+            if sign != 1.0:
+                lever *= sign
+        out = np.empty((6, *w.shape[1:]))
+        cross_soa(w, lever, out[:3])
+        np.multiply(w, sign, out=out[3:])
+        return out
 
     def order_rows(self, frames: TreeFrames, site_pos: np.ndarray) -> None:
         """Choose the static pivots at one configuration (``frames`` of N = 1, e.g. home):
@@ -353,8 +358,12 @@ class ClosureStructure:
         return out
 
 
-def cross_soa(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the first axis (3, ...)."""
-    return np.stack(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    )
+def cross_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Cross product over the first axis (3, ...) (into ``out`` when given)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape)) if out is None else out
+    tmp = np.empty(out.shape[1:])
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[j], b[k], out=out[i])
+        np.multiply(a[k], b[j], out=tmp)
+        out[i] -= tmp
+    return out

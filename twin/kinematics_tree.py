@@ -65,6 +65,7 @@ class JointGroup:
 class Level:
     bodies: np.ndarray | slice
     parents: np.ndarray | slice
+    world_parent: bool  # every body's parent is the world
     free_local: np.ndarray  # positions (in bodies) of bodies moved by a free joint
     free_joints: np.ndarray
     groups: tuple[JointGroup, ...]  # in joint order within each body
@@ -126,6 +127,7 @@ class TreePlan:
         return Level(
             as_index(bodies),
             as_index(parents),
+            bool(np.all(parents == 0)),
             np.array(free_local, int),
             np.array(free_joints, int),
             tuple(groups),
@@ -165,19 +167,30 @@ class TreeFrames:
     xanchor: np.ndarray  # (3, njnt, N)
     xaxis: np.ndarray  # (3, njnt, N)
 
-    def site_positions(self, model: mujoco.MjModel, sites: np.ndarray) -> np.ndarray:
-        """World positions (3, S, N) of ``sites``."""
+    def site_positions(
+        self, model: mujoco.MjModel, sites: np.ndarray, part: np.ndarray | None = None
+    ) -> np.ndarray:
+        """World positions (3, S, N) of ``sites`` (of the configurations ``part`` selects)."""
         sites = np.asarray(sites, dtype=int)
         body = model.site_bodyid[sites]
+        xpos, xmat = self.xpos[:, body], self.xmat[:, :, body]
+        if part is not None:
+            xpos, xmat = xpos[..., part], xmat[..., part]
         local = model.site_pos[sites].T[:, :, None]
-        return self.xpos[:, body] + matvec(self.xmat[:, :, body], local)
+        return xpos + matvec(xmat, local)
 
-    def site_rotations(self, model: mujoco.MjModel, sites: np.ndarray) -> np.ndarray:
-        """World rotations (3, 3, S, N) of ``sites``."""
+    def site_rotations(
+        self, model: mujoco.MjModel, sites: np.ndarray, part: np.ndarray | None = None
+    ) -> np.ndarray:
+        """World rotations (3, 3, S, N) of ``sites`` (of the configurations ``part`` selects)."""
         sites = np.asarray(sites, dtype=int)
-        body = model.site_bodyid[sites]
-        local = rotation_soa(model.site_quat[sites])[..., None]
-        return matmul(self.xmat[:, :, body], local)
+        xmat = self.xmat[:, :, model.site_bodyid[sites]]
+        if part is not None:
+            xmat = xmat[..., part]
+        quat = model.site_quat[sites]
+        if np.all(quat == np.array([1.0, 0.0, 0.0, 0.0])):
+            return xmat
+        return matmul(xmat, rotation_soa(quat)[..., None])
 
 
 @dataclass(frozen=True)
@@ -243,10 +256,26 @@ def tree_frames(
     xaxis = np.zeros((3, plan.njnt, n))
     for li, level in enumerate(plan.levels):
         b, p = level.bodies, level.parents
-        pr = xmat[:, :, p]
         bp, br = numbers.body_pos[li], numbers.body_rot[li]
-        pos = xpos[:, p] + matvec(pr, bp) if bp is not None else xpos[:, p].copy()
-        rot = matmul(pr, br) if br is not None else pr.copy()
+        if isinstance(b, slice):  # the level's frames computed in place (views)
+            pos, rot = xpos[:, b], xmat[:, :, b]
+        else:
+            g = len(b)
+            pos, rot = np.empty((3, g, n)), np.empty((3, 3, g, n))
+        if level.world_parent:  # the world frame is the identity: nothing to multiply
+            pos[...] = 0.0 if bp is None else bp
+            rot[...] = np.eye(3)[:, :, None, None] if br is None else br
+        else:
+            pr = xmat[:, :, p]
+            if bp is None:
+                pos[...] = xpos[:, p]
+            else:
+                np.einsum("ikgn,kgn->ign", pr, bp, out=pos)
+                pos += xpos[:, p]
+            if br is None:
+                rot[...] = pr
+            else:
+                np.einsum("ikgn,kjgn->ijgn", pr, br, out=rot)
         for g, gn in zip(level.groups, numbers.groups[li], strict=True):
             _apply_joints(g, gn, model, qpos, pos, rot, xanchor, xaxis)
         if level.free_local.size:
@@ -257,8 +286,9 @@ def tree_frames(
             rot[:, :, fl] = _rotation_from_quat_soa(quat)
             xanchor[:, fj] = pos[:, fl]
             xaxis[:, fj] = model.jnt_axis[fj].T[:, :, None]
-        xpos[:, b] = pos
-        xmat[:, :, b] = rot
+        if not isinstance(b, slice):
+            xpos[:, b] = pos
+            xmat[:, :, b] = rot
     return TreeFrames(xpos, xmat, xanchor, xaxis)
 
 
