@@ -66,6 +66,8 @@ class Level:
     bodies: np.ndarray | slice
     parents: np.ndarray | slice
     world_parent: bool  # every body's parent is the world
+    parent_local: np.ndarray | slice  # the parents' positions in the previous level
+    size: int  # bodies in the level
     free_local: np.ndarray  # positions (in bodies) of bodies moved by a free joint
     free_joints: np.ndarray
     groups: tuple[JointGroup, ...]  # in joint order within each body
@@ -82,12 +84,14 @@ class TreePlan:
         for b in range(1, model.nbody):  # MuJoCo orders bodies parents first
             depth[b] = depth[model.body_parentid[b]] + 1
         self.levels: list[Level] = []
+        previous = np.zeros(1, dtype=int)  # the world
         for d in range(1, int(depth.max(initial=0)) + 1):
             bodies = np.flatnonzero(depth == d)
-            self.levels.append(self._level(model, bodies))
+            self.levels.append(self._level(model, bodies, previous))
+            previous = bodies
 
     @staticmethod
-    def _level(model: mujoco.MjModel, bodies: np.ndarray) -> Level:
+    def _level(model: mujoco.MjModel, bodies: np.ndarray, previous: np.ndarray) -> Level:
         free_local, free_joints = [], []
         slots: dict[tuple[int, int, int], list[tuple[int, int, int]]] = {}
         for i, b in enumerate(bodies):
@@ -128,6 +132,8 @@ class TreePlan:
             as_index(bodies),
             as_index(parents),
             bool(np.all(parents == 0)),
+            as_index(np.searchsorted(previous, parents)),
+            len(bodies),
             np.array(free_local, int),
             np.array(free_joints, int),
             tuple(groups),
@@ -254,28 +260,20 @@ def tree_frames(
     xmat[:, :, 0] = np.eye(3)[:, :, None]
     xanchor = np.zeros((3, plan.njnt, n))
     xaxis = np.zeros((3, plan.njnt, n))
+    prev_pos = prev_rot = None  # the previous level's frames (contiguous: fast products)
     for li, level in enumerate(plan.levels):
-        b, p = level.bodies, level.parents
+        b = level.bodies
         bp, br = numbers.body_pos[li], numbers.body_rot[li]
-        if isinstance(b, slice):  # the level's frames computed in place (views)
-            pos, rot = xpos[:, b], xmat[:, :, b]
-        else:
-            g = len(b)
-            pos, rot = np.empty((3, g, n)), np.empty((3, 3, g, n))
+        g = level.size
         if level.world_parent:  # the world frame is the identity: nothing to multiply
-            pos[...] = 0.0 if bp is None else bp
+            pos = np.zeros((3, g, n)) if bp is None else np.repeat(bp, n, axis=2)
+            rot = np.empty((3, 3, g, n))
             rot[...] = np.eye(3)[:, :, None, None] if br is None else br
         else:
-            pr = xmat[:, :, p]
-            if bp is None:
-                pos[...] = xpos[:, p]
-            else:
-                np.einsum("ikgn,kgn->ign", pr, bp, out=pos)
-                pos += xpos[:, p]
-            if br is None:
-                rot[...] = pr
-            else:
-                np.einsum("ikgn,kjgn->ijgn", pr, br, out=rot)
+            pl = level.parent_local
+            pp, pr = prev_pos[:, pl], prev_rot[:, :, pl]
+            pos = pp.copy() if bp is None else matvec(pr, bp) + pp
+            rot = pr.copy() if br is None else matmul(pr, br)
         for g, gn in zip(level.groups, numbers.groups[li], strict=True):
             _apply_joints(g, gn, model, qpos, pos, rot, xanchor, xaxis)
         if level.free_local.size:
@@ -286,9 +284,9 @@ def tree_frames(
             rot[:, :, fl] = _rotation_from_quat_soa(quat)
             xanchor[:, fj] = pos[:, fl]
             xaxis[:, fj] = model.jnt_axis[fj].T[:, :, None]
-        if not isinstance(b, slice):
-            xpos[:, b] = pos
-            xmat[:, :, b] = rot
+        xpos[:, b] = pos
+        xmat[:, :, b] = rot
+        prev_pos, prev_rot = pos, rot
     return TreeFrames(xpos, xmat, xanchor, xaxis)
 
 
