@@ -324,9 +324,17 @@ def _apply_joints(g: JointGroup, gn: GroupNumbers, model, qpos, pos, rot, xancho
             theta *= gn.sign
         c, s = np.cos(theta), np.sin(theta)
         a, b = _COLUMNS[g.axis_class]
-        ra, rb = r[:, a].copy(), r[:, b]
-        rot[:, a, loc] = c * ra + s * rb
-        rot[:, b, loc] = c * rb - s * ra
+        ra, rb = r[:, a].copy(), r[:, b]  # rb is read before its column is written
+        tmp = np.empty_like(ra)
+        in_place = isinstance(loc, slice)  # columns written through views, else copied
+        na = rot[:, a, loc] if in_place else np.empty_like(ra)
+        nb = rot[:, b, loc] if in_place else np.empty_like(ra)
+        np.multiply(c, ra, out=na)
+        na += np.multiply(s, rb, out=tmp)
+        np.multiply(c, rb, out=nb)
+        nb -= np.multiply(s, ra, out=tmp)
+        if not in_place:
+            rot[:, a, loc], rot[:, b, loc] = na, nb
     else:
         if g.kind == HINGE:
             local = _axis_angle_soa(model.jnt_axis[g.joints], qpos[adr] - gn.zero)
