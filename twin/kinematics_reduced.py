@@ -157,6 +157,7 @@ class ClosureStructure:
         # elimination (ClosureStructure.order_rows); the identity until chosen
         self.rank = [np.tile(np.arange(g.rows), (len(g.closures), 1)) for g in self.groups]
         self.reduced_order = np.arange(len(self.shared))  # the reduced system's, likewise
+        self._plans: dict[int, tuple[list, list[np.ndarray]]] = {}  # see _scatter_plan
         self.square = fits and nf == self.n_closure
         shared_pos = -np.ones(nf, dtype=int)
         shared_pos[self.shared] = np.arange(len(self.shared))
@@ -238,18 +239,46 @@ class ClosureStructure:
             site_pos, rhs = site_pos[..., part], rhs[..., part]
         n, m_rhs = rhs.shape[-1], rhs.shape[1]
         s = len(self.shared)
-        mats = [np.zeros((g.rows, g.k + s + m_rhs, len(g.closures), n)) for g in self.groups]
-        for ec in self.classes:
-            vals = self._values(ec, axes, anchors, site_pos)
-            for g, comp, pk, col, slot in ec.dest:
-                grp = self.groups[g]
-                ncol, ng = grp.k + s + m_rhs, len(grp.closures)
-                flat = (self.rank[g][slot, comp] * ncol + col) * ng + slot
-                mats[g].reshape(-1, n)[flat] = vals[comp, pk]
+        scatter, zero = self._scatter_plan(m_rhs)
+        mats = [np.empty((g.rows, g.k + s + m_rhs, len(g.closures), n)) for g in self.groups]
+        for g, mat in enumerate(mats):  # the entries no closure writes: structural zeros
+            mat.reshape(-1, n)[zero[g]] = 0.0
+        for ec, plan in zip(self.classes, scatter, strict=True):
+            vals = self._values(ec, axes, anchors, site_pos).reshape(-1, n)
+            for g, flat, src in plan:
+                mats[g].reshape(-1, n)[flat] = vals[src]
         for g, (src, dst) in enumerate(self.rhs_rows):
             grp = self.groups[g]
             mats[g][self.rank[g][dst[:, 1], dst[:, 0]], grp.k + s :, dst[:, 1]] = rhs[src]
         return mats
+
+    def _scatter_plan(self, m_rhs: int) -> tuple[list, list[np.ndarray]]:
+        """Where :meth:`matrices` puts each entry class's values (per class: (group, flat
+        rows of the matrix, rows of the values)) and which rows stay zero, for ``m_rhs``
+        right-hand sides (kept: it depends only on the structure and the static pivots)."""
+        found = self._plans.get(m_rhs)
+        if found is not None:
+            return found
+        s = len(self.shared)
+        written = [
+            np.zeros((g.rows, g.k + s + m_rhs, len(g.closures)), dtype=bool) for g in self.groups
+        ]
+        scatter = []
+        for ec in self.classes:
+            plan = []
+            for g, comp, pk, col, slot in ec.dest:
+                grp = self.groups[g]
+                ncol, ng = grp.k + s + m_rhs, len(grp.closures)
+                rows = self.rank[g][slot, comp]
+                flat = (rows * ncol + col) * ng + slot
+                plan.append((g, flat, comp * len(ec.dof) + pk))
+                written[g][rows, col, slot] = True
+            scatter.append(plan)
+        for g, (_, dst) in enumerate(self.rhs_rows):
+            written[g][self.rank[g][dst[:, 1], dst[:, 0]], self.groups[g].k + s :, dst[:, 1]] = True
+        zero = [np.flatnonzero(~w.reshape(-1)) for w in written]
+        self._plans[m_rhs] = (scatter, zero)
+        return scatter, zero
 
     def dense(self, frames: TreeFrames, site_pos: np.ndarray) -> np.ndarray:
         """The full closure Jacobian (N, n_closure, n_free) w.r.t. the free dofs, rows in
@@ -293,6 +322,7 @@ class ClosureStructure:
             for slot in range(len(grp.closures)):
                 order = pivot_order(mat[:, : grp.k, slot, 0], grp.k)
                 self.rank[g][slot, order] = np.arange(grp.rows)
+        self._plans.clear()  # the scatter plans follow the new row order
         s = len(self.shared)
         if self.square and s:
             mats = self.matrices(frames, site_pos, rhs)
