@@ -380,10 +380,7 @@ class ClosureStructure:
             top = mat[: g.k, g.k + s :] - np.einsum(
                 "ktgn,tmn->kmgn", mat[: g.k, g.k : g.k + s], x_s
             )
-            gn = mat.shape[2] * n
-            x = back_substitute(
-                mat[: g.k, : g.k].reshape(g.k, g.k, gn), top.reshape(g.k, m_rhs, gn)
-            ).reshape(g.k, m_rhs, len(g.closures), n)
+            x = back_substitute(mat[: g.k, : g.k], top)  # (k, m, G, N)
             out[g.private.T] = np.moveaxis(x, 2, 1)
         return out
 

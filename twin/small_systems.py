@@ -71,12 +71,16 @@ def eliminate_static(mat: np.ndarray, k: int, threshold: float = THRESHOLD) -> n
 
 
 def back_substitute(u: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """x with u x = rhs for upper-triangular u (k, k, L) and rhs (k, m, L)."""
+    """x with u x = rhs for upper-triangular u (k, k, ...) and rhs (k, m, ...) (any trailing
+    axes: the systems)."""
     k = u.shape[0]
-    x = np.empty_like(rhs)
+    x = np.empty(rhs.shape)
     for i in range(k - 1, -1, -1):
-        acc = rhs[i] - np.einsum("tl,tml->ml", u[i, i + 1 :], x[i + 1 :]) if i < k - 1 else rhs[i]
-        x[i] = acc / u[i, i]
+        if i < k - 1:
+            acc = rhs[i] - np.einsum("t...,tm...->m...", u[i, i + 1 :], x[i + 1 :])
+        else:
+            acc = rhs[i]
+        np.divide(acc, u[i, i], out=x[i])
     return x
 
 
