@@ -14,7 +14,10 @@ Everything is read from the model (which dof moves which site, joint kinds), so 
 goes through this one code path; a structure the elimination does not fit (a closure with more
 private columns than rows, a dof in no closure) treats every dof as shared, which is the full
 system. Arrays are "structure of arrays" with the configurations last (twin.kinematics_tree).
-Elimination is numpy vectorised over configurations: no per-configuration LAPACK call.
+Elimination is numpy vectorised over configurations (twin.small_systems): no per-configuration
+LAPACK call. Pivots are static (chosen once by partial pivoting at the home configuration, for
+each closure and for the square reduced system) and checked in every solve; a system whose
+pivot fails the threshold test is redone by Householder reflections.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numpy as np
 
 from twin.kinematics_tree import FREE, HINGE, TreeFrames, as_index
 from twin.mechanism import Mechanism
-from twin.small_systems import (  # noqa: F401 (eliminate_static: tests replace it here)
+from twin.small_systems import (  # eliminate_static: the tests replace it here
     back_substitute,
     eliminate,
     eliminate_static,
