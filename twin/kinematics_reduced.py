@@ -242,11 +242,13 @@ class ClosureStructure:
             site_pos, rhs = site_pos[..., part], rhs[..., part]
         n, m_rhs = rhs.shape[-1], rhs.shape[1]
         s = len(self.shared)
-        scatter, zero = self._scatter_plan(m_rhs)
+        scatter, fixed = self._scatter_plan(m_rhs)
         mats = [np.empty((g.rows, g.k + s + m_rhs, len(g.closures), n)) for g in self.groups]
-        for g, mat in enumerate(mats):  # the entries no closure writes: structural zeros
-            mat.reshape(-1, n)[zero[g]] = 0.0
+        for mat, (flat, value) in zip(mats, fixed, strict=True):  # zeros and constants
+            mat.reshape(-1, n)[flat] = value[:, None]
         for ec, plan in zip(self.classes, scatter, strict=True):
+            if plan is None:  # constant entries, already written
+                continue
             vals = self._values(ec, axes, anchors, site_pos).reshape(-1, n)
             for g, flat, src in plan:
                 mats[g].reshape(-1, n)[flat] = vals[src]
@@ -255,10 +257,12 @@ class ClosureStructure:
             mats[g][self.rank[g][dst[:, 1], dst[:, 0]], grp.k + s :, dst[:, 1]] = rhs[src]
         return mats
 
-    def _scatter_plan(self, m_rhs: int) -> tuple[list, list[np.ndarray]]:
-        """Where :meth:`matrices` puts each entry class's values (per class: (group, flat
-        rows of the matrix, rows of the values)) and which rows stay zero, for ``m_rhs``
-        right-hand sides (kept: it depends only on the structure and the static pivots)."""
+    def _scatter_plan(self, m_rhs: int) -> tuple[list, list[tuple[np.ndarray, np.ndarray]]]:
+        """Where :meth:`matrices` puts each entry class's values, for ``m_rhs`` right-hand
+        sides: per class (group, flat rows of the matrix, rows of the values), or None for a
+        class whose values are constant (a free joint's translations along world axes);
+        per group the flat rows and values of every constant entry (those and the
+        structural zeros). Kept: it depends only on the structure and the static pivots."""
         found = self._plans.get(m_rhs)
         if found is not None:
             return found
@@ -266,22 +270,35 @@ class ClosureStructure:
         written = [
             np.zeros((g.rows, g.k + s + m_rhs, len(g.closures)), dtype=bool) for g in self.groups
         ]
+        const_flat: list[list[np.ndarray]] = [[] for _ in self.groups]
+        const_value: list[list[np.ndarray]] = [[] for _ in self.groups]
         scatter = []
         for ec in self.classes:
+            constant = not ec.rot and np.all(self.dof_kind[ec.dof] == AXIS_WORLD)
+            values = (ec.ma - ec.mb) * np.eye(3)[:, self.dof_col[ec.dof]] if constant else None
             plan = []
             for g, comp, pk, col, slot in ec.dest:
                 grp = self.groups[g]
                 ncol, ng = grp.k + s + m_rhs, len(grp.closures)
                 rows = self.rank[g][slot, comp]
                 flat = (rows * ncol + col) * ng + slot
-                plan.append((g, flat, comp * len(ec.dof) + pk))
+                if constant:
+                    const_flat[g].append(flat)
+                    const_value[g].append(values[comp, pk])
+                else:
+                    plan.append((g, flat, comp * len(ec.dof) + pk))
                 written[g][rows, col, slot] = True
-            scatter.append(plan)
+            scatter.append(None if constant else plan)
         for g, (_, dst) in enumerate(self.rhs_rows):
             written[g][self.rank[g][dst[:, 1], dst[:, 0]], self.groups[g].k + s :, dst[:, 1]] = True
-        zero = [np.flatnonzero(~w.reshape(-1)) for w in written]
-        self._plans[m_rhs] = (scatter, zero)
-        return scatter, zero
+        fixed = []
+        for g, w in enumerate(written):
+            zero = np.flatnonzero(~w.reshape(-1))
+            flat = np.concatenate([zero, *const_flat[g]])
+            value = np.concatenate([np.zeros(zero.size), *const_value[g]])
+            fixed.append((flat, value))
+        self._plans[m_rhs] = (scatter, fixed)
+        return scatter, fixed
 
     def dense(self, frames: TreeFrames, site_pos: np.ndarray) -> np.ndarray:
         """The full closure Jacobian (N, n_closure, n_free) w.r.t. the free dofs, rows in
@@ -304,14 +321,15 @@ class ClosureStructure:
         sign = ec.ma - ec.mb
         if not ec.rot:
             return w if sign == 1.0 else sign * w
+        out = np.empty((6, *w.shape[1:]))
         if ec.ma and ec.mb:
-            lever = site_pos[:, ec.site_a] - site_pos[:, ec.site_b]
+            cross_soa(w, site_pos[:, ec.site_a] - site_pos[:, ec.site_b], out[:3])
         else:
             lever = site_pos[:, ec.site_a if ec.ma else ec.site_b] - anchors[:, ec.dof]
-            if sign != 1.0:
-                lever *= sign
-        out = np.empty((6, *w.shape[1:]))
-        cross_soa(w, lever, out[:3])
+            if sign == 1.0:
+                cross_soa(w, lever, out[:3])
+            else:  # w x (-lever) = lever x w, the same numbers
+                cross_soa(lever, w, out[:3])
         np.multiply(w, sign, out=out[3:])
         return out
 
