@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 
 import mujoco
 import numpy as np
@@ -185,7 +186,9 @@ def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: n
         if not np.any(keep):
             break
         part = None if np.all(keep) else keep
-        step = cs.solve(cs.matrices(frames, pos, -r[:, None], part))[:, 0]
+        rhs = -r[:, None]
+        mats = cs.matrices(frames, pos, rhs, part)
+        step = cs.solve(mats, rebuild=partial(cs.matrices, frames, pos, rhs, part))[:, 0]
         norm = np.sqrt(np.sum(step * step, axis=0))
         step *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-300))
         ids = active[keep]

@@ -22,6 +22,7 @@ pivot fails the threshold test is redone by Householder reflections.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -352,16 +353,26 @@ class ClosureStructure:
             if red.shape[0] == s:
                 self.reduced_order = pivot_order(red[:, :s, 0], s)
 
-    def eliminate_groups(self, mats: list[np.ndarray]) -> None:
+    def eliminate_groups(
+        self, mats: list[np.ndarray], rebuild: Callable[[], list[np.ndarray]] | None = None
+    ) -> None:
         """Eliminate every closure's private columns, in place on ``matrices``' output:
         static pivots (Householder where one is too small) for square systems, Householder
-        for least squares (orthogonal, so the reduced rows keep the least-squares answer)."""
-        for g, mat in zip(self.groups, mats, strict=True):
+        for least squares (orthogonal, so the reduced rows keep the least-squares answer).
+
+        The systems whose static pivots are refused are redone from their original
+        matrices: a copy kept beforehand, or, when given, ``rebuild()`` (the same
+        ``matrices`` again), called only if a pivot is refused, which saves the copy."""
+        fresh = None
+        for gi, (g, mat) in enumerate(zip(self.groups, mats, strict=True)):
             flat = mat.reshape(g.rows, mat.shape[1], -1)
             if self.square:
-                saved = flat.copy()
+                saved = flat.copy() if rebuild is None else None
                 ok = eliminate_static(flat, g.k)
                 if not np.all(ok):
+                    if saved is None:
+                        fresh = rebuild() if fresh is None else fresh
+                        saved = fresh[gi].reshape(flat.shape)
                     again = saved[..., ~ok]
                     eliminate(again, g.k)
                     flat[..., ~ok] = again
@@ -377,14 +388,16 @@ class ClosureStructure:
             reduced.append(np.moveaxis(red, 2, 1).reshape(-1, red.shape[1], n))
         return np.concatenate(reduced)
 
-    def solve(self, mats: list[np.ndarray]) -> np.ndarray:
+    def solve(
+        self, mats: list[np.ndarray], rebuild: Callable[[], list[np.ndarray]] | None = None
+    ) -> np.ndarray:
         """Solutions (n_free, m, N) of the systems ``matrices`` assembled (in place on them):
         square reduced systems by static pivots (Householder where one is refused), others
-        by Householder (least squares)."""
+        by Householder (least squares); ``rebuild`` as in :meth:`eliminate_groups`."""
         s = len(self.shared)
         n = mats[0].shape[-1]
         m_rhs = mats[0].shape[1] - self.groups[0].k - s
-        self.eliminate_groups(mats)
+        self.eliminate_groups(mats, rebuild)
         out = np.empty((len(self.free), m_rhs, n))
         if s:
             red = self._reduced(mats)

@@ -194,9 +194,12 @@ class TreeFrames:
         if part is not None:
             xmat = xmat[..., part]
         quat = model.site_quat[sites]
-        if np.all(quat == np.array([1.0, 0.0, 0.0, 0.0])):
-            return xmat
-        return matmul(xmat, rotation_soa(quat)[..., None])
+        turned = np.flatnonzero(np.any(quat != np.array([1.0, 0.0, 0.0, 0.0]), axis=1))
+        if turned.size == len(sites):
+            return matmul(xmat, rotation_soa(quat)[..., None])
+        if turned.size:  # sites with an identity rotation keep their body's (exactly)
+            xmat[:, :, turned] = matmul(xmat[:, :, turned], rotation_soa(quat[turned])[..., None])
+        return xmat
 
 
 @dataclass(frozen=True)
