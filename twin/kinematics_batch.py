@@ -70,7 +70,7 @@ def integrate_positions(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray)
 
 
 FIELDS = ("site_xpos", "site_xmat", "xaxis", "xanchor", "xmat")  # MuJoCo's frame fields
-CHUNK = 1024  # poses solved together: long numpy operations, arrays still in cache
+CHUNK = 2048  # most poses solved together: long numpy operations, arrays mostly in cache
 PARALLEL_MIN = 2048  # fewer poses than this run on one thread (threads cost more)
 
 
@@ -116,8 +116,11 @@ def forward_batch(
         predict_start(fk, q, commands)
     residual = np.zeros(n)
     sites = np.zeros((3, 3 + 1, len(fk.out_sites), n))  # position, then rotation columns
-    chunks = [slice(i, min(n, i + CHUNK)) for i in range(0, n, CHUNK)]
     workers = 1 if n < PARALLEL_MIN else (nthread if nthread > 0 else (os.cpu_count() or 1))
+    count = -(-n // CHUNK)  # chunks of at most CHUNK poses, as many for every worker
+    count = -(-count // workers) * workers
+    size = -(-n // count)
+    chunks = [slice(i, min(n, i + size)) for i in range(0, n, size)]
     workers = max(1, min(len(chunks), workers))
 
     def work(k: int) -> int:
