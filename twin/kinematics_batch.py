@@ -71,6 +71,7 @@ def integrate_positions(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray)
 
 FIELDS = ("site_xpos", "site_xmat", "xaxis", "xanchor", "xmat")  # MuJoCo's frame fields
 CHUNK = 2048  # most poses solved together: long numpy operations, arrays mostly in cache
+CHUNK_ENTRIES = 2**19  # ... and at most about this many closure-matrix entries in a chunk
 PARALLEL_MIN = 2048  # fewer poses than this run on one thread (threads cost more)
 
 
@@ -117,7 +118,7 @@ def forward_batch(
     residual = np.zeros(n)
     sites = np.zeros((3, 3 + 1, len(fk.out_sites), n))  # position, then rotation columns
     workers = 1 if n < PARALLEL_MIN else (nthread if nthread > 0 else (os.cpu_count() or 1))
-    count = -(-n // CHUNK)  # chunks of at most CHUNK poses, as many for every worker
+    count = -(-n // _chunk_limit(fk))  # chunks of at most that many, as many per worker
     count = -(-count // workers) * workers
     size = -(-n // count)
     chunks = [slice(i, min(n, i + size)) for i in range(0, n, size)]
@@ -151,6 +152,18 @@ def forward_batch(
         residual=residual,
         iterations=iterations,
     )
+
+
+def _chunk_limit(fk: FastKinematics) -> int:
+    """Most poses in one chunk: CHUNK, fewer where the closure matrices of each pose are
+    large (measured: the hexapod's 432 entries per pose ran best at 1024 poses, the
+    polisher's 162 at 2048)."""
+    cs = fk.closure
+    if cs is None:
+        return CHUNK
+    s = len(cs.shared)
+    entries = sum(g.rows * (g.k + s + 1) * len(g.closures) for g in cs.groups)
+    return max(256, min(CHUNK, CHUNK_ENTRIES // max(entries, 1)))
 
 
 def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: np.ndarray) -> int:
