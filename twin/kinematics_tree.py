@@ -261,8 +261,8 @@ def tree_frames(
     xmat = np.empty((3, 3, plan.nbody, n))
     xpos[:, 0] = 0.0
     xmat[:, :, 0] = np.eye(3)[:, :, None]
-    xanchor = np.zeros((3, plan.njnt, n))
-    xaxis = np.zeros((3, plan.njnt, n))
+    xanchor = np.empty((3, plan.njnt, n))  # every joint is written below
+    xaxis = np.empty((3, plan.njnt, n))
     prev_pos = prev_rot = None  # the previous level's frames (contiguous: fast products)
     for li, level in enumerate(plan.levels):
         b = level.bodies
