@@ -210,6 +210,15 @@ def test_a_model_edited_in_place_is_followed(machines):
     assert np.abs(moved - forward_batch(mech, commands[:10]).targets).max() > 1e-4
 
 
+@pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher"])
+def test_batch_with_every_static_pivot_refused(machines, name, monkeypatch):
+    """Householder for every closure system (the rebuilt matrices): the same solutions."""
+    mech, commands = machines[name]
+    refuse = lambda mat, k, threshold=0.1: np.zeros(mat.shape[-1], dtype=bool)  # noqa: E731
+    monkeypatch.setattr(kinematics_reduced, "eliminate_static", refuse)
+    _assert_batch_equals_single(mech, commands[:20])
+
+
 def test_four_bar_least_squares_closure():
     mech = Mechanism.from_xml_string(FOUR_BAR)
     cs = fast_kinematics(mech).closure
@@ -244,4 +253,7 @@ def test_elimination_and_adjoint_equal_dense_solves(machines, name, monkeypatch)
     refuse = lambda mat, k, threshold=0.1: np.zeros(mat.shape[-1], dtype=bool)  # noqa: E731
     monkeypatch.setattr(kinematics_reduced, "eliminate_static", refuse)
     np.testing.assert_allclose(cs.solve(cs.matrices(frames, pos, rhs)), ref, atol=1e-9)
+    # ... also when the refused systems are rebuilt instead of copied beforehand
+    rebuilt = cs.solve(cs.matrices(frames, pos, rhs), rebuild=lambda: cs.matrices(frames, pos, rhs))
+    np.testing.assert_allclose(rebuilt, ref, atol=1e-9)
     np.testing.assert_allclose(adjoint_solve(cs, frames, pos, b), ref_t, atol=1e-9)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 
 import mujoco
 import numpy as np
@@ -69,7 +70,8 @@ def integrate_positions(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray)
 
 
 FIELDS = ("site_xpos", "site_xmat", "xaxis", "xanchor", "xmat")  # MuJoCo's frame fields
-CHUNK = 1024  # poses solved together: long numpy operations, arrays still in cache
+CHUNK = 2048  # most poses solved together: long numpy operations, arrays mostly in cache
+CHUNK_ENTRIES = 2**19  # ... and at most about this many closure-matrix entries in a chunk
 PARALLEL_MIN = 2048  # fewer poses than this run on one thread (threads cost more)
 
 
@@ -115,8 +117,11 @@ def forward_batch(
         predict_start(fk, q, commands)
     residual = np.zeros(n)
     sites = np.zeros((3, 3 + 1, len(fk.out_sites), n))  # position, then rotation columns
-    chunks = [slice(i, min(n, i + CHUNK)) for i in range(0, n, CHUNK)]
     workers = 1 if n < PARALLEL_MIN else (nthread if nthread > 0 else (os.cpu_count() or 1))
+    count = -(-n // _chunk_limit(fk))  # chunks of at most that many, as many per worker
+    count = -(-count // workers) * workers
+    size = -(-n // count)
+    chunks = [slice(i, min(n, i + size)) for i in range(0, n, size)]
     workers = max(1, min(len(chunks), workers))
 
     def work(k: int) -> int:
@@ -147,6 +152,18 @@ def forward_batch(
         residual=residual,
         iterations=iterations,
     )
+
+
+def _chunk_limit(fk: FastKinematics) -> int:
+    """Most poses in one chunk: CHUNK, fewer where the closure matrices of each pose are
+    large (measured: the hexapod's 432 entries per pose ran best at 1024 poses, the
+    polisher's 162 at 2048)."""
+    cs = fk.closure
+    if cs is None:
+        return CHUNK
+    s = len(cs.shared)
+    entries = sum(g.rows * (g.k + s + 1) * len(g.closures) for g in cs.groups)
+    return max(256, min(CHUNK, CHUNK_ENTRIES // max(entries, 1)))
 
 
 def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: np.ndarray) -> int:
@@ -185,7 +202,9 @@ def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: n
         if not np.any(keep):
             break
         part = None if np.all(keep) else keep
-        step = cs.solve(cs.matrices(frames, pos, -r[:, None], part))[:, 0]
+        rhs = -r[:, None]
+        mats = cs.matrices(frames, pos, rhs, part)
+        step = cs.solve(mats, rebuild=partial(cs.matrices, frames, pos, rhs, part))[:, 0]
         norm = np.sqrt(np.sum(step * step, axis=0))
         step *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-300))
         ids = active[keep]
@@ -196,25 +215,15 @@ def _solve_chunk(fk: FastKinematics, q: np.ndarray, residual: np.ndarray, out: n
     return it
 
 
-def _subset(frames: TreeFrames, mask: np.ndarray) -> TreeFrames:
-    """The frames of the configurations ``mask`` selects."""
-    return TreeFrames(
-        frames.xpos[..., mask],
-        frames.xmat[..., mask],
-        frames.xanchor[..., mask],
-        frames.xaxis[..., mask],
-    )
-
-
 def _store(
     fk: FastKinematics, frames: TreeFrames, out: np.ndarray, done: np.ndarray, active: np.ndarray
 ) -> None:
     """Tool and target frames of the poses that are done (``done`` over ``active``) into
     ``out`` (3, 4, S, N): column 0 the sites' positions, columns 1-3 the tool's rotation."""
-    sub = _subset(frames, done) if not np.all(done) else frames
+    part = None if np.all(done) else done
     m = fk.model
     ids = active[done]
-    pos = sub.site_positions(m, fk.out_sites)  # (3, S, k)
+    pos = frames.site_positions(m, fk.out_sites, part)  # (3, S, k)
     out[:, 0, :, ids] = np.moveaxis(pos, -1, 0)
-    rot = sub.site_rotations(m, fk.out_sites[:1])  # (3, 3, 1, k)
+    rot = frames.site_rotations(m, fk.out_sites[:1], part)  # (3, 3, 1, k)
     out[:, 1:, 0, ids] = rot[:, :, 0]

@@ -128,8 +128,7 @@ class KinematicStructure:
             home = mech.home_qpos[:, None].copy()
             frames = tree_frames(self.tree, mech.model, home)
             pos = frames.site_positions(mech.model, self.closure.sites)
-            rhs = np.zeros((mech.n_closure, 1, 1))
-            self.closure.order_rows(self.closure.matrices(frames, pos, rhs))
+            self.closure.order_rows(frames, pos)
         self.out_sites = np.concatenate([[mech.tool_site], mech.target_sites]).astype(int)
         m = mech.model
         free = mech.free_dofs()
@@ -139,6 +138,7 @@ class KinematicStructure:
         self.multi_joints = sorted({int(m.dof_jntid[d]) for d in free[~simple]})
         self.free = free
         self.free_position = {int(d): i for i, d in enumerate(free)}
+        self.simple_rows = np.array([self.free_position[int(d)] for d in self.simple_dof], int)
 
 
 def kinematic_structure(mech: Mechanism) -> KinematicStructure:
@@ -167,6 +167,7 @@ class FastKinematics:
         self.tree, self.closure, self.out_sites = st.tree, st.closure, st.out_sites
         self.simple_dof, self.simple_qpos = st.simple_dof, st.simple_qpos
         self.multi_joints, self.free_position = st.multi_joints, st.free_position
+        self.simple_rows = st.simple_rows  # rows of the simple dofs in a step over free dofs
         self._predictor_key: bytes | None = None
         self._predictor: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._numbers_key: bytes | None = None
@@ -256,7 +257,7 @@ def integrate_soa(fk: FastKinematics, q: np.ndarray, step: np.ndarray) -> None:
     m = fk.model
     pos_in_free = fk.free_position
     if fk.simple_dof.size:
-        q[fk.simple_qpos] += step[[pos_in_free[int(d)] for d in fk.simple_dof]]
+        q[fk.simple_qpos] += step[fk.simple_rows]
     for j in fk.multi_joints:
         qa, da = int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
         if int(m.jnt_type[j]) == FREE:

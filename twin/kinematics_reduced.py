@@ -14,11 +14,15 @@ Everything is read from the model (which dof moves which site, joint kinds), so 
 goes through this one code path; a structure the elimination does not fit (a closure with more
 private columns than rows, a dof in no closure) treats every dof as shared, which is the full
 system. Arrays are "structure of arrays" with the configurations last (twin.kinematics_tree).
-Elimination is numpy vectorised over configurations: no per-configuration LAPACK call.
+Elimination is numpy vectorised over configurations (twin.small_systems): no per-configuration
+LAPACK call. Pivots are static (chosen once by partial pivoting at the home configuration, for
+each closure and for the square reduced system) and checked in every solve; a system whose
+pivot fails the threshold test is redone by Householder reflections.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -26,6 +30,14 @@ import numpy as np
 
 from twin.kinematics_tree import FREE, HINGE, TreeFrames, as_index
 from twin.mechanism import Mechanism
+from twin.small_systems import (  # eliminate_static: the tests replace it here
+    back_substitute,
+    eliminate,
+    eliminate_static,
+    pivot_order,
+    solve_dense,
+    solve_square,
+)
 
 BALL = int(mujoco.mjtJoint.mjJNT_BALL)
 AXIS_JOINT, AXIS_WORLD, AXIS_BODY = 0, 1, 2  # a dof's axis: joint xaxis, world e_k, body column
@@ -148,6 +160,8 @@ class ClosureStructure:
         # row order of each closure's equations in its matrix: the static pivots of the
         # elimination (ClosureStructure.order_rows); the identity until chosen
         self.rank = [np.tile(np.arange(g.rows), (len(g.closures), 1)) for g in self.groups]
+        self.reduced_order = np.arange(len(self.shared))  # the reduced system's, likewise
+        self._plans: dict[int, tuple[list, list[np.ndarray]]] = {}  # see _scatter_plan
         self.square = fits and nf == self.n_closure
         shared_pos = -np.ones(nf, dtype=int)
         shared_pos[self.shared] = np.arange(len(self.shared))
@@ -229,18 +243,63 @@ class ClosureStructure:
             site_pos, rhs = site_pos[..., part], rhs[..., part]
         n, m_rhs = rhs.shape[-1], rhs.shape[1]
         s = len(self.shared)
-        mats = [np.zeros((g.rows, g.k + s + m_rhs, len(g.closures), n)) for g in self.groups]
-        for ec in self.classes:
-            vals = self._values(ec, axes, anchors, site_pos)
-            for g, comp, pk, col, slot in ec.dest:
-                grp = self.groups[g]
-                ncol, ng = grp.k + s + m_rhs, len(grp.closures)
-                flat = (self.rank[g][slot, comp] * ncol + col) * ng + slot
-                mats[g].reshape(-1, n)[flat] = vals[comp, pk]
+        scatter, fixed = self._scatter_plan(m_rhs)
+        mats = [np.empty((g.rows, g.k + s + m_rhs, len(g.closures), n)) for g in self.groups]
+        for mat, (flat, value) in zip(mats, fixed, strict=True):  # zeros and constants
+            mat.reshape(-1, n)[flat] = value[:, None]
+        for ec, plan in zip(self.classes, scatter, strict=True):
+            if plan is None:  # constant entries, already written
+                continue
+            vals = self._values(ec, axes, anchors, site_pos).reshape(-1, n)
+            for g, flat, src in plan:
+                mats[g].reshape(-1, n)[flat] = vals[src]
         for g, (src, dst) in enumerate(self.rhs_rows):
             grp = self.groups[g]
             mats[g][self.rank[g][dst[:, 1], dst[:, 0]], grp.k + s :, dst[:, 1]] = rhs[src]
         return mats
+
+    def _scatter_plan(self, m_rhs: int) -> tuple[list, list[tuple[np.ndarray, np.ndarray]]]:
+        """Where :meth:`matrices` puts each entry class's values, for ``m_rhs`` right-hand
+        sides: per class (group, flat rows of the matrix, rows of the values), or None for a
+        class whose values are constant (a free joint's translations along world axes);
+        per group the flat rows and values of every constant entry (those and the
+        structural zeros). Kept: it depends only on the structure and the static pivots."""
+        found = self._plans.get(m_rhs)
+        if found is not None:
+            return found
+        s = len(self.shared)
+        written = [
+            np.zeros((g.rows, g.k + s + m_rhs, len(g.closures)), dtype=bool) for g in self.groups
+        ]
+        const_flat: list[list[np.ndarray]] = [[] for _ in self.groups]
+        const_value: list[list[np.ndarray]] = [[] for _ in self.groups]
+        scatter = []
+        for ec in self.classes:
+            constant = not ec.rot and np.all(self.dof_kind[ec.dof] == AXIS_WORLD)
+            values = (ec.ma - ec.mb) * np.eye(3)[:, self.dof_col[ec.dof]] if constant else None
+            plan = []
+            for g, comp, pk, col, slot in ec.dest:
+                grp = self.groups[g]
+                ncol, ng = grp.k + s + m_rhs, len(grp.closures)
+                rows = self.rank[g][slot, comp]
+                flat = (rows * ncol + col) * ng + slot
+                if constant:
+                    const_flat[g].append(flat)
+                    const_value[g].append(values[comp, pk])
+                else:
+                    plan.append((g, flat, comp * len(ec.dof) + pk))
+                written[g][rows, col, slot] = True
+            scatter.append(None if constant else plan)
+        for g, (_, dst) in enumerate(self.rhs_rows):
+            written[g][self.rank[g][dst[:, 1], dst[:, 0]], self.groups[g].k + s :, dst[:, 1]] = True
+        fixed = []
+        for g, w in enumerate(written):
+            zero = np.flatnonzero(~w.reshape(-1))
+            flat = np.concatenate([zero, *const_flat[g]])
+            value = np.concatenate([np.zeros(zero.size), *const_value[g]])
+            fixed.append((flat, value))
+        self._plans[m_rhs] = (scatter, fixed)
+        return scatter, fixed
 
     def dense(self, frames: TreeFrames, site_pos: np.ndarray) -> np.ndarray:
         """The full closure Jacobian (N, n_closure, n_free) w.r.t. the free dofs, rows in
@@ -260,64 +319,90 @@ class ClosureStructure:
     ) -> np.ndarray:
         """Linear rows (and angular rows of rotational dofs) of one entry class, (3|6, E, N)."""
         w = axes[:, ec.dof]
+        sign = ec.ma - ec.mb
         if not ec.rot:
-            return (ec.ma - ec.mb) * w
-        lever = -(ec.ma - ec.mb) * anchors[:, ec.dof]
-        if ec.ma:
-            lever = lever + site_pos[:, ec.site_a]
-        if ec.mb:
-            lever = lever - site_pos[:, ec.site_b]
-        return np.concatenate([cross_soa(w, lever), (ec.ma - ec.mb) * w])
+            return w if sign == 1.0 else sign * w
+        out = np.empty((6, *w.shape[1:]))
+        if ec.ma and ec.mb:
+            cross_soa(w, site_pos[:, ec.site_a] - site_pos[:, ec.site_b], out[:3])
+        else:
+            lever = site_pos[:, ec.site_a if ec.ma else ec.site_b] - anchors[:, ec.dof]
+            if sign == 1.0:
+                cross_soa(w, lever, out[:3])
+            else:  # w x (-lever) = lever x w, the same numbers
+                cross_soa(lever, w, out[:3])
+        np.multiply(w, sign, out=out[3:])
+        return out
 
-    def order_rows(self, mats: list[np.ndarray]) -> None:
-        """Choose each closure's static pivot rows by partial pivoting on one configuration's
-        matrices (from :meth:`matrices` with the identity order, N = 1)."""
+    def order_rows(self, frames: TreeFrames, site_pos: np.ndarray) -> None:
+        """Choose the static pivots at one configuration (``frames`` of N = 1, e.g. home):
+        each closure's rows by partial pivoting on its private columns, then the rows of the
+        square reduced system by partial pivoting on it."""
+        rhs = np.zeros((self.n_closure, 1, 1))
+        mats = self.matrices(frames, site_pos, rhs)
         for g, (grp, mat) in enumerate(zip(self.groups, mats, strict=True)):
             for slot in range(len(grp.closures)):
-                a = np.array(mat[:, : grp.k, slot, 0])
-                order = list(range(grp.rows))
-                for j in range(grp.k):
-                    p = j + int(np.argmax(np.abs(a[j:, j])))
-                    a[[j, p]], order[j], order[p] = a[[p, j]], order[p], order[j]
-                    if a[j, j] != 0.0:
-                        a[j + 1 :] -= np.outer(a[j + 1 :, j] / a[j, j], a[j])
+                order = pivot_order(mat[:, : grp.k, slot, 0], grp.k)
                 self.rank[g][slot, order] = np.arange(grp.rows)
+        self._plans.clear()  # the scatter plans follow the new row order
+        s = len(self.shared)
+        if self.square and s:
+            mats = self.matrices(frames, site_pos, rhs)
+            self.eliminate_groups(mats)
+            red = self._reduced(mats)
+            if red.shape[0] == s:
+                self.reduced_order = pivot_order(red[:, :s, 0], s)
 
-    def eliminate_groups(self, mats: list[np.ndarray]) -> None:
+    def eliminate_groups(
+        self, mats: list[np.ndarray], rebuild: Callable[[], list[np.ndarray]] | None = None
+    ) -> None:
         """Eliminate every closure's private columns, in place on ``matrices``' output:
         static pivots (Householder where one is too small) for square systems, Householder
-        for least squares (orthogonal, so the reduced rows keep the least-squares answer)."""
-        for g, mat in zip(self.groups, mats, strict=True):
+        for least squares (orthogonal, so the reduced rows keep the least-squares answer).
+
+        The systems whose static pivots are refused are redone from their original
+        matrices: a copy kept beforehand, or, when given, ``rebuild()`` (the same
+        ``matrices`` again), called only if a pivot is refused, which saves the copy."""
+        fresh = None
+        for gi, (g, mat) in enumerate(zip(self.groups, mats, strict=True)):
             flat = mat.reshape(g.rows, mat.shape[1], -1)
             if self.square:
-                saved = flat.copy()
+                saved = flat.copy() if rebuild is None else None
                 ok = eliminate_static(flat, g.k)
                 if not np.all(ok):
+                    if saved is None:
+                        fresh = rebuild() if fresh is None else fresh
+                        saved = fresh[gi].reshape(flat.shape)
                     again = saved[..., ~ok]
                     eliminate(again, g.k)
                     flat[..., ~ok] = again
             else:
                 eliminate(flat, g.k)
 
-    def solve(self, mats: list[np.ndarray]) -> np.ndarray:
-        """Solutions (n_free, m, N) of the systems ``matrices`` assembled (in place on them)."""
-        s = len(self.shared)
+    def _reduced(self, mats: list[np.ndarray]) -> np.ndarray:
+        """The reduced rows (rows after elimination, s + m, N) over the shared columns."""
         n = mats[0].shape[-1]
-        m_rhs = mats[0].shape[1] - self.groups[0].k - s
-        self.eliminate_groups(mats)
         reduced = []
         for g, mat in zip(self.groups, mats, strict=True):
             red = mat[g.k :, g.k :]  # (rows - k, s + m, G, N)
-            reduced.append(np.moveaxis(red, 2, 1).reshape(-1, s + m_rhs, n))
+            reduced.append(np.moveaxis(red, 2, 1).reshape(-1, red.shape[1], n))
+        return np.concatenate(reduced)
+
+    def solve(
+        self, mats: list[np.ndarray], rebuild: Callable[[], list[np.ndarray]] | None = None
+    ) -> np.ndarray:
+        """Solutions (n_free, m, N) of the systems ``matrices`` assembled (in place on them):
+        square reduced systems by static pivots (Householder where one is refused), others
+        by Householder (least squares); ``rebuild`` as in :meth:`eliminate_groups`."""
+        s = len(self.shared)
+        n = mats[0].shape[-1]
+        m_rhs = mats[0].shape[1] - self.groups[0].k - s
+        self.eliminate_groups(mats, rebuild)
         out = np.empty((len(self.free), m_rhs, n))
         if s:
-            red = np.concatenate(reduced)
-            if red.shape[0] == s:  # square: LAPACK's pivoted solve, one per configuration
-                x_s = np.moveaxis(
-                    np.linalg.solve(np.moveaxis(red[:, :s], -1, 0), np.moveaxis(red[:, s:], -1, 0)),
-                    0,
-                    -1,
-                )
+            red = self._reduced(mats)
+            if red.shape[0] == s:
+                x_s = solve_square(red[self.reduced_order])
             else:
                 x_s = solve_dense(red, s)
             out[self.shared] = x_s
@@ -329,74 +414,17 @@ class ClosureStructure:
             top = mat[: g.k, g.k + s :] - np.einsum(
                 "ktgn,tmn->kmgn", mat[: g.k, g.k : g.k + s], x_s
             )
-            gn = mat.shape[2] * n
-            x = back_substitute(
-                mat[: g.k, : g.k].reshape(g.k, g.k, gn), top.reshape(g.k, m_rhs, gn)
-            ).reshape(g.k, m_rhs, len(g.closures), n)
+            x = back_substitute(mat[: g.k, : g.k], top)  # (k, m, G, N)
             out[g.private.T] = np.moveaxis(x, 2, 1)
         return out
 
 
-def cross_soa(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the first axis (3, ...)."""
-    return np.stack(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    )
-
-
-def eliminate(mat: np.ndarray, k: int) -> None:
-    """Householder reflections on the first ``k`` columns of ``mat`` (rows, cols, L), in
-    place, independently for each of the L systems: the first k rows become upper triangular
-    (with their right-hand columns), the others the reduced rows (an orthonormal basis of the
-    complement of those k columns applied to the rest, so least squares is preserved)."""
-    rows = mat.shape[0]
-    for j in range(min(k, rows)):
-        x = mat[j:, j]  # (rows - j, L)
-        norm = np.sqrt(np.einsum("rl,rl->l", x, x))
-        alpha = np.where(x[0] > 0, -norm, norm)  # reflect away from x0: no cancellation
-        v = x.copy()
-        v[0] -= alpha
-        vtv = 2.0 * norm * (norm + np.abs(x[0]))  # |x - alpha e1|^2
-        beta = np.where(vtv > 0, 2.0 / np.where(vtv > 0, vtv, 1.0), 0.0)
-        if j + 1 < mat.shape[1]:
-            rest = mat[j:, j + 1 :]
-            w = np.einsum("rl,rcl->cl", v, rest) * beta
-            rest -= v[:, None] * w[None]
-        mat[j, j] = alpha
-        mat[j + 1 :, j] = 0.0
-
-
-def eliminate_static(mat: np.ndarray, k: int, threshold: float = 0.1) -> np.ndarray:
-    """Gaussian elimination of the first ``k`` columns of ``mat`` (rows, cols, L) in place,
-    pivots on the diagonal (the rows already ordered), independently for each of the L
-    systems; returns which systems had every pivot at least ``threshold`` times the largest
-    entry below it (threshold pivoting: bounded growth). The others must be redone."""
-    ok = np.ones(mat.shape[-1], dtype=bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for j in range(k):
-            col = np.abs(mat[j:, j])
-            piv = col[0]
-            ok &= (piv > 0) & (piv >= threshold * np.max(col, axis=0))
-            if j + 1 < mat.shape[0]:
-                factor = mat[j + 1 :, j] / mat[j, j]
-                mat[j + 1 :, j + 1 :] -= factor[:, None] * mat[j, None, j + 1 :]
-                mat[j + 1 :, j] = 0.0
-    return ok
-
-
-def back_substitute(u: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """x with u x = rhs for upper-triangular u (k, k, L) and rhs (k, m, L)."""
-    k = u.shape[0]
-    x = np.empty_like(rhs)
-    for i in range(k - 1, -1, -1):
-        acc = rhs[i] - np.einsum("tl,tml->ml", u[i, i + 1 :], x[i + 1 :]) if i < k - 1 else rhs[i]
-        x[i] = acc / u[i, i]
-    return x
-
-
-def solve_dense(mat: np.ndarray, s: int) -> np.ndarray:
-    """Solve the systems [A | B] (R, s + m, N) for X (s, m, N): A X = B, in the
-    least-squares sense when R > s (Householder, then back substitution)."""
-    mat = np.array(mat)
-    eliminate(mat, s)
-    return back_substitute(mat[:s, :s], mat[:s, s:])
+def cross_soa(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Cross product over the first axis (3, ...) (into ``out`` when given)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape)) if out is None else out
+    tmp = np.empty(out.shape[1:])
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(a[j], b[k], out=out[i])
+        np.multiply(a[k], b[j], out=tmp)
+        out[i] -= tmp
+    return out

@@ -65,6 +65,9 @@ class JointGroup:
 class Level:
     bodies: np.ndarray | slice
     parents: np.ndarray | slice
+    world_parent: bool  # every body's parent is the world
+    parent_local: np.ndarray | slice  # the parents' positions in the previous level
+    size: int  # bodies in the level
     free_local: np.ndarray  # positions (in bodies) of bodies moved by a free joint
     free_joints: np.ndarray
     groups: tuple[JointGroup, ...]  # in joint order within each body
@@ -81,12 +84,14 @@ class TreePlan:
         for b in range(1, model.nbody):  # MuJoCo orders bodies parents first
             depth[b] = depth[model.body_parentid[b]] + 1
         self.levels: list[Level] = []
+        previous = np.zeros(1, dtype=int)  # the world
         for d in range(1, int(depth.max(initial=0)) + 1):
             bodies = np.flatnonzero(depth == d)
-            self.levels.append(self._level(model, bodies))
+            self.levels.append(self._level(model, bodies, previous))
+            previous = bodies
 
     @staticmethod
-    def _level(model: mujoco.MjModel, bodies: np.ndarray) -> Level:
+    def _level(model: mujoco.MjModel, bodies: np.ndarray, previous: np.ndarray) -> Level:
         free_local, free_joints = [], []
         slots: dict[tuple[int, int, int], list[tuple[int, int, int]]] = {}
         for i, b in enumerate(bodies):
@@ -126,6 +131,9 @@ class TreePlan:
         return Level(
             as_index(bodies),
             as_index(parents),
+            bool(np.all(parents == 0)),
+            as_index(np.searchsorted(previous, parents)),
+            len(bodies),
             np.array(free_local, int),
             np.array(free_joints, int),
             tuple(groups),
@@ -165,19 +173,33 @@ class TreeFrames:
     xanchor: np.ndarray  # (3, njnt, N)
     xaxis: np.ndarray  # (3, njnt, N)
 
-    def site_positions(self, model: mujoco.MjModel, sites: np.ndarray) -> np.ndarray:
-        """World positions (3, S, N) of ``sites``."""
+    def site_positions(
+        self, model: mujoco.MjModel, sites: np.ndarray, part: np.ndarray | None = None
+    ) -> np.ndarray:
+        """World positions (3, S, N) of ``sites`` (of the configurations ``part`` selects)."""
         sites = np.asarray(sites, dtype=int)
         body = model.site_bodyid[sites]
+        xpos, xmat = self.xpos[:, body], self.xmat[:, :, body]
+        if part is not None:
+            xpos, xmat = xpos[..., part], xmat[..., part]
         local = model.site_pos[sites].T[:, :, None]
-        return self.xpos[:, body] + matvec(self.xmat[:, :, body], local)
+        return xpos + matvec(xmat, local)
 
-    def site_rotations(self, model: mujoco.MjModel, sites: np.ndarray) -> np.ndarray:
-        """World rotations (3, 3, S, N) of ``sites``."""
+    def site_rotations(
+        self, model: mujoco.MjModel, sites: np.ndarray, part: np.ndarray | None = None
+    ) -> np.ndarray:
+        """World rotations (3, 3, S, N) of ``sites`` (of the configurations ``part`` selects)."""
         sites = np.asarray(sites, dtype=int)
-        body = model.site_bodyid[sites]
-        local = rotation_soa(model.site_quat[sites])[..., None]
-        return matmul(self.xmat[:, :, body], local)
+        xmat = self.xmat[:, :, model.site_bodyid[sites]]
+        if part is not None:
+            xmat = xmat[..., part]
+        quat = model.site_quat[sites]
+        turned = np.flatnonzero(np.any(quat != np.array([1.0, 0.0, 0.0, 0.0]), axis=1))
+        if turned.size == len(sites):
+            return matmul(xmat, rotation_soa(quat)[..., None])
+        if turned.size:  # sites with an identity rotation keep their body's (exactly)
+            xmat[:, :, turned] = matmul(xmat[:, :, turned], rotation_soa(quat[turned])[..., None])
+        return xmat
 
 
 @dataclass(frozen=True)
@@ -239,14 +261,22 @@ def tree_frames(
     xmat = np.empty((3, 3, plan.nbody, n))
     xpos[:, 0] = 0.0
     xmat[:, :, 0] = np.eye(3)[:, :, None]
-    xanchor = np.zeros((3, plan.njnt, n))
-    xaxis = np.zeros((3, plan.njnt, n))
+    xanchor = np.empty((3, plan.njnt, n))  # every joint is written below
+    xaxis = np.empty((3, plan.njnt, n))
+    prev_pos = prev_rot = None  # the previous level's frames (contiguous: fast products)
     for li, level in enumerate(plan.levels):
-        b, p = level.bodies, level.parents
-        pr = xmat[:, :, p]
+        b = level.bodies
         bp, br = numbers.body_pos[li], numbers.body_rot[li]
-        pos = xpos[:, p] + matvec(pr, bp) if bp is not None else xpos[:, p].copy()
-        rot = matmul(pr, br) if br is not None else pr.copy()
+        g = level.size
+        if level.world_parent:  # the world frame is the identity: nothing to multiply
+            pos = np.zeros((3, g, n)) if bp is None else np.repeat(bp, n, axis=2)
+            rot = np.empty((3, 3, g, n))
+            rot[...] = np.eye(3)[:, :, None, None] if br is None else br
+        else:
+            pl = level.parent_local
+            pp, pr = prev_pos[:, pl], prev_rot[:, :, pl]
+            pos = pp.copy() if bp is None else matvec(pr, bp) + pp
+            rot = pr.copy() if br is None else matmul(pr, br)
         for g, gn in zip(level.groups, numbers.groups[li], strict=True):
             _apply_joints(g, gn, model, qpos, pos, rot, xanchor, xaxis)
         if level.free_local.size:
@@ -259,6 +289,7 @@ def tree_frames(
             xaxis[:, fj] = model.jnt_axis[fj].T[:, :, None]
         xpos[:, b] = pos
         xmat[:, :, b] = rot
+        prev_pos, prev_rot = pos, rot
     return TreeFrames(xpos, xmat, xanchor, xaxis)
 
 
@@ -296,9 +327,17 @@ def _apply_joints(g: JointGroup, gn: GroupNumbers, model, qpos, pos, rot, xancho
             theta *= gn.sign
         c, s = np.cos(theta), np.sin(theta)
         a, b = _COLUMNS[g.axis_class]
-        ra, rb = r[:, a].copy(), r[:, b]
-        rot[:, a, loc] = c * ra + s * rb
-        rot[:, b, loc] = c * rb - s * ra
+        ra, rb = r[:, a].copy(), r[:, b]  # rb is read before its column is written
+        tmp = np.empty_like(ra)
+        in_place = isinstance(loc, slice)  # columns written through views, else copied
+        na = rot[:, a, loc] if in_place else np.empty_like(ra)
+        nb = rot[:, b, loc] if in_place else np.empty_like(ra)
+        np.multiply(c, ra, out=na)
+        na += np.multiply(s, rb, out=tmp)
+        np.multiply(c, rb, out=nb)
+        nb -= np.multiply(s, ra, out=tmp)
+        if not in_place:
+            rot[:, a, loc], rot[:, b, loc] = na, nb
     else:
         if g.kind == HINGE:
             local = _axis_angle_soa(model.jnt_axis[g.joints], qpos[adr] - gn.zero)
