@@ -23,11 +23,18 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+# The tests on every core (pytest-xdist; WORKERS=0: in this process), a module whole on one
+# worker (its fixtures built once), the modules with accuracy gates first (tests/conftest.py).
+# BLAS on one thread per worker: the workers already fill the cores.
+WORKERS ?= auto
+PYTEST  := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+	$(PY) -m pytest -q -n $(WORKERS) --dist loadfile --no-loadscope-reorder
+
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -q -m "not accuracy"
+	$(PYTEST) -m "not accuracy"
 
 scenario: $(STAMP)
 ifneq ($(strip $(FILE)),)

@@ -88,6 +88,23 @@ def test_diagnose_command_on_the_scenario_files(run, tmp_path, capsys):
     assert json.loads(out.read_text())["chi2_p_value"] < 0.01
 
 
+def test_the_recording_shows_data_in_every_view(run):
+    """The scenario's rerun recording, read back as test_recording reads the other
+    scenarios': every view has data; the loop's residual before and after, the verdict."""
+    from test_recording import Readback, assert_every_view_has_data
+
+    _, out_dir = run
+    path = out_dir / "undeclared_effect.rrd"
+    rb = Readback(path)
+    views = assert_every_view_has_data(rb, path)
+    names = " | ".join(v["name"] for v in views)
+    assert "report: key numbers" in names
+    assert "verdict" in names and "residual mm against measurement order" in names
+    verdict = rb.rows["/verdict", "TextDocument:text"][0][0]
+    assert "Verdict:" in verdict and "tracker noise floor" in verdict
+    assert len(rb.rows["/metrics/residual_mm/with_named_effect", "Scalars:scalars"]) > 1
+
+
 def test_unknown_effect_in_a_scenario_is_named(tmp_path):
     from scenarios.config import ScenarioError
 
