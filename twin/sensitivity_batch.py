@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.kinematics_adjoint import adjoint_solve
+from twin.closure_linearisation import ClosureLinearisation, ClosurePart
+from twin.kinematics_adjoint import adjoint_solve_factored, eliminated
 from twin.kinematics_fast import (
     KinematicStructure,
     fast_kinematics,
@@ -82,53 +83,82 @@ def _aos(model, frames: TreeFrames, sites: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _closure_rows(mech: Mechanism, dpos: np.ndarray, drot: np.ndarray) -> np.ndarray:
-    """Per-closure position and rotation rows (N, C, 3, k) stacked in residual order."""
-    out = np.empty((dpos.shape[0], mech.n_closure, dpos.shape[-1]))
-    row = 0
-    for i, c in enumerate(mech.closures):
-        out[:, row : row + 3] = dpos[:, i]
-        if c.kind == "weld":
-            out[:, row + 3 : row + 6] = drot[:, i]
-        row += c.size
-    return out
-
-
 def _chunk(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, plan
-) -> np.ndarray:
+) -> tuple[np.ndarray, ClosurePart | None]:
+    """(N, T*3, n) for the configurations ``qpos`` (N, nq), and what a first-order start of
+    the closure solve needs (None for a serial chain).
+
+    A parameter's screw moves a site it affects by ``t + w x (p - o)`` (translation ``t``,
+    rotation ``w`` about the pivot ``o``), i.e. ``v + w x p`` with ``v = t - w x o``; the
+    closures' rows are the differences of their two sites' motions (and of ``w`` for a weld's
+    rotation). The implicit term ``-z^T c_pi`` (``z`` from the adjoint solve, one column per
+    target coordinate) is contracted without forming ``c_pi``: with ``D`` the structural
+    (closure, parameter) matrix of signed site incidences, ``z_c . (v + w x p) = (z_c) . v +
+    (p x z_c) . w``, summed over closures first (a small matrix product per pose chunk), then
+    dotted with each parameter's ``v`` and ``w``."""
     m = mech.model
     fk = fast_kinematics(mech)
     frames = tree_frames(fk.tree, m, np.ascontiguousarray(qpos.T), fk.numbers())
     cs = fk.closure
-    targets = mech.target_sites
+    targets = np.asarray(mech.target_sites, dtype=int)
     closure_sites = cs.sites if cs is not None else np.zeros(0, dtype=int)
     sites = np.concatenate([closure_sites, targets]).astype(int)
-    aos = _aos(m, frames, sites)
-    screws = params.screws_batch(m, aos, values)
-    dp, dw = params.site_derivatives_batch(m, aos["site_xpos"], sites, screws)
-    n_pose, n_par, nc = len(qpos), len(params), len(closure_sites) // 2
-    y = dp[:, 2 * nc :].reshape(n_pose, -1, n_par)
-    if cs is None:  # a serial chain: the explicit term is all
-        return y
-    c_pi = _closure_rows(mech, dp[:, :nc] - dp[:, nc : 2 * nc], dw[:, :nc] - dw[:, nc : 2 * nc])
-    site_pos = aos["site_xpos"][:, sites].transpose(2, 1, 0)  # (3, S, N)
-    axes, anchors = cs.dof_axes(frames)  # (3, n_free, N)
+    t, wn, o = params.screws_soa(m, frames.xpos, frames.xmat, frames.xanchor, frames.xaxis, values)
+    vn = t - cross_soa(wn, o)  # (3, n, N)
+    site_pos = frames.site_positions(m, sites)  # (3, S, N)
+    affected = params.site_affected(m, sites).astype(float)  # (S, n)
+    n_pose, n_par, nc, n_t = len(qpos), len(params), len(closure_sites) // 2, len(targets)
     pt = site_pos[:, 2 * nc :]  # (3, T, N)
-    lin = np.broadcast_to(axes[:, None], (3, len(targets), *axes.shape[1:])).copy()
+    y = vn[:, None] + cross_soa(wn[:, None], pt[:, :, None])  # (3, T, n, N)
+    y *= affected[None, 2 * nc :, :, None]
+    y = y.transpose(3, 1, 0, 2).reshape(n_pose, n_t * 3, n_par)
+    if cs is None:  # a serial chain: the explicit term is all
+        return y, None
+    axes, anchors = cs.dof_axes(frames)  # (3, n_free, N)
+    lin = np.broadcast_to(axes[:, None], (3, n_t, *axes.shape[1:])).copy()
     rot = cs.dof_rot
     lever = pt[:, :, None] - anchors[:, None, rot]
     lin[:, :, rot] = cross_soa(axes[:, None, rot], lever)
     lin *= plan.target_moves[None, :, :, None]
-    jt = lin.transpose(3, 1, 0, 2).reshape(n_pose, -1, len(plan.free))  # (N, T*3, n_free)
-    if cs.square:
-        # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
-        # sides per pose instead of one with a column per parameter
-        z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt.transpose(2, 1, 0))
-        return y - z.transpose(2, 1, 0) @ c_pi
-    mats = cs.matrices(frames, site_pos[:, : 2 * nc], -c_pi.transpose(1, 2, 0))
-    dq = cs.solve(mats)  # (n_free, n_par, N), least squares
-    return jt @ dq.transpose(2, 0, 1) + y
+    jt = lin.transpose(2, 1, 0, 3).reshape(len(plan.free), n_t * 3, n_pose)  # (n_free, m, N)
+    aff_a, aff_b = affected[:nc], affected[nc : 2 * nc]
+    pa, pb = site_pos[:, :nc], site_pos[:, nc : 2 * nc]  # (3, C, N)
+    factor = eliminated(cs, frames, site_pos[:, : 2 * nc]) if cs.square else None
+    part = ClosurePart(frames, site_pos[:, : 2 * nc], factor, vn, wn, aff_a, aff_b)
+    if not cs.square:
+        # least squares over more closure equations than free dofs: dq = -J^+ c_pi
+        c_pi = np.zeros((mech.n_closure, n_par, n_pose))
+        da = (vn[:, None] + cross_soa(wn[:, None], pa[:, :, None])) * aff_a[None, :, :, None]
+        db = (vn[:, None] + cross_soa(wn[:, None], pb[:, :, None])) * aff_b[None, :, :, None]
+        dw = wn[:, None] * (aff_a - aff_b)[None, :, :, None]
+        for i, c in enumerate(mech.closures):
+            r0 = cs.row_offset[i]
+            c_pi[r0 : r0 + 3] = da[:, i] - db[:, i]
+            if c.kind == "weld":
+                c_pi[r0 + 3 : r0 + 6] = dw[:, i]
+        dq = cs.solve(cs.matrices(frames, site_pos[:, : 2 * nc], -c_pi))  # (n_free, n, N)
+        return np.einsum("fmn,fkn->nmk", jt, dq) + y, part
+    # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
+    # sides per pose instead of one with a column per parameter
+    z = adjoint_solve_factored(cs, factor, jt)  # (n_closure, m, N)
+    pos_rows = cs.row_offset[:, None] + np.arange(3)
+    zc = z[pos_rows]  # (C, 3, m, N)
+    flat = zc.reshape(nc, -1)
+    za = ((aff_a - aff_b).T @ flat).reshape(n_par, 3, -1, n_pose)
+    ma = aff_a.T @ cross_soa(pa[:, :, None], zc.transpose(1, 0, 2, 3)).transpose(
+        1, 0, 2, 3
+    ).reshape(nc, -1)
+    ma -= aff_b.T @ cross_soa(pb[:, :, None], zc.transpose(1, 0, 2, 3)).transpose(
+        1, 0, 2, 3
+    ).reshape(nc, -1)
+    welds = np.flatnonzero(cs.weld)
+    if welds.size:
+        zr = z[cs.row_offset[welds][:, None] + np.arange(3, 6)].reshape(welds.size, -1)
+        ma += (aff_a[welds] - aff_b[welds]).T @ zr
+    ma = ma.reshape(n_par, 3, -1, n_pose)
+    corr = np.einsum("kimn,ikn->nmk", za, vn) + np.einsum("kimn,ikn->nmk", ma, wn)
+    return y - corr, part
 
 
 def target_jacobian_batch(
@@ -141,11 +171,28 @@ def target_jacobian_batch(
     """d(targets)/d(parameters) at closed configurations ``qpos`` (N, nq): (N*T*3, n), rows
     pose-major then target then x, y, z (as ``targets.reshape(-1)``). ``mech`` carries the
     model with ``values`` injected; ``plan`` (from the nominal machine) may be reused."""
+    return target_jacobian_linearised(mech, params, values, qpos, plan)[0]
+
+
+def target_jacobian_linearised(
+    mech: Mechanism,
+    params: ParameterSet,
+    values: np.ndarray,
+    qpos: np.ndarray,
+    plan: JacobianPlan | None = None,
+) -> tuple[np.ndarray, ClosureLinearisation | None]:
+    """:func:`target_jacobian_batch` and the closure's linearisation at ``qpos`` (first-order
+    starts of the closure solve at nearby values; None for a serial chain)."""
     plan = plan or JacobianPlan.for_mechanism(mech)
     qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
+    values = np.array(values, dtype=float)
     with one_blas_thread():
-        parts = [
-            _chunk(mech, params, values, qpos[i : i + CHUNK], plan)
+        chunks = [
+            (slice(i, i + CHUNK), _chunk(mech, params, values, qpos[i : i + CHUNK], plan))
             for i in range(0, len(qpos), CHUNK)
         ]
-    return np.concatenate(parts).reshape(-1, len(params))
+    jac = np.concatenate([c[1][0] for c in chunks]).reshape(-1, len(params))
+    if chunks[0][1][1] is None:
+        return jac, None
+    parts = tuple((sl, c[1]) for sl, c in chunks)
+    return jac, ClosureLinearisation(mech, values, qpos.copy(), parts)
