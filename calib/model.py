@@ -11,12 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.closure_linearisation import ClosureLinearisation
-from twin.exceptions import ClosureError
-from twin.kinematics_batch import BatchSolution, forward_batch
+from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
-from twin.sensitivity_batch import JacobianPlan, target_jacobian_linearised
+from twin.sensitivity_batch import JacobianPlan, target_jacobian_batch
 
 
 @dataclass(frozen=True)
@@ -34,7 +32,6 @@ class CalibrationModel:
         self._cache_key: bytes | None = None
         self._cache_mech: Mechanism | None = None
         self._warm: tuple[bytes, np.ndarray] | None = None
-        self._linear: ClosureLinearisation | None = None  # of the last Jacobian
         self._plan = JacobianPlan.for_mechanism(nominal)
 
     @property
@@ -54,37 +51,15 @@ class CalibrationModel:
 
     def predict(self, values: np.ndarray, commands: np.ndarray) -> Prediction:
         """Targets at ``commands`` for parameter ``values``. Solving the same commands again
-        (as an estimator does for nearby values) starts from the previous solution, or, after
-        a Jacobian at these commands, from its solution moved to first order towards
-        ``values`` (twin.closure_linearisation): the same closure, in fewer Newton steps."""
-        values = np.asarray(values, dtype=float)
+        (as an estimator does for nearby values) starts from the previous solution."""
         commands = np.asarray(commands, dtype=float)
         key = commands.tobytes()
         start = self._warm[1] if self._warm is not None and self._warm[0] == key else None
-        sol = self._solve(values, commands, start)
+        sol = forward_batch(self.mechanism(values), commands, start=start)
         self._warm = (key, sol.qpos)
         return Prediction(targets=sol.targets, qpos=sol.qpos)
-
-    def _solve(
-        self, values: np.ndarray, commands: np.ndarray, start: np.ndarray | None
-    ) -> BatchSolution:
-        lin = self._linear
-        if lin is not None and lin.fits(commands):
-            if np.array_equal(values, lin.values):
-                first_order = lin.qpos
-            else:
-                first_order = lin.start(values)
-            if first_order is not None:
-                try:
-                    return forward_batch(self.mechanism(values), commands, start=first_order)
-                except ClosureError:
-                    pass  # the plain warm start below decides
-        return forward_batch(self.mechanism(values), commands, start=start)
 
     def jacobian(self, values: np.ndarray, prediction: Prediction) -> np.ndarray:
         """d(targets)/d(values), (P*T*3, n), rows ordered as ``targets.reshape(-1)``."""
         mech = self.mechanism(values)
-        jac, self._linear = target_jacobian_linearised(
-            mech, self.params, values, prediction.qpos, self._plan
-        )
-        return jac
+        return target_jacobian_batch(mech, self.params, values, prediction.qpos, self._plan)

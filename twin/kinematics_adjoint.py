@@ -27,16 +27,9 @@ def adjoint_solve(
 ) -> np.ndarray:
     """z (n_closure, m, N) with ``J^T z = b`` for b (n_free, m, N); J the closure Jacobian at
     ``frames`` (``site_pos`` the closure sites' positions, as ClosureStructure.matrices)."""
-    return adjoint_solve_factored(cs, eliminated(cs, frames, site_pos), b)
-
-
-def eliminated(cs: ClosureStructure, frames: TreeFrames, site_pos: np.ndarray) -> list[np.ndarray]:
-    """Per group the closure Jacobian at ``frames`` eliminated with an identity right-hand
-    side (ClosureStructure.matrices' layout): ``[U ; 0 | B_top ; B_red | T]``, ``T`` the row
-    transform of each closure (its columns in residual row order)."""
     if not cs.square:
         raise ValueError("the adjoint solve needs an exactly determined closure system")
-    n = frames.xpos.shape[-1]
+    n, m_rhs = b.shape[-1], b.shape[1]
     rmax = max(g.rows for g in cs.groups)
     ident = np.zeros((cs.n_closure, rmax, n))
     for c, off in enumerate(cs.row_offset):
@@ -44,14 +37,6 @@ def eliminated(cs: ClosureStructure, frames: TreeFrames, site_pos: np.ndarray) -
         ident[off + np.arange(size), np.arange(size)] = 1.0
     mats = cs.matrices(frames, site_pos, ident)
     cs.eliminate_groups(mats)
-    return mats
-
-
-def adjoint_solve_factored(
-    cs: ClosureStructure, mats: list[np.ndarray], b: np.ndarray
-) -> np.ndarray:
-    """:func:`adjoint_solve` with the elimination :func:`eliminated` already done."""
-    n, m_rhs = b.shape[-1], b.shape[1]
     s = len(cs.shared)
     rhs_s = b[cs.shared].copy() if s else None
     tops, reduced = [], []
@@ -83,53 +68,6 @@ def adjoint_solve_factored(
         for slot, c in enumerate(g.closures):
             z[cs.row_offset[c] + np.arange(r)] = zc[:, :, slot]
     return z
-
-
-def forward_solve_factored(
-    cs: ClosureStructure, mats: list[np.ndarray], c: np.ndarray
-) -> np.ndarray:
-    """x (n_free, N) with ``J x = c`` for c (n_closure, N) in residual row order, from the
-    elimination :func:`eliminated`: ``T_c c_c = [top ; reduced]`` per closure, the reduced
-    rows solved for the shared columns, then the private ones by back substitution."""
-    n = c.shape[-1]
-    s = len(cs.shared)
-    out = np.empty((len(cs.free), n))
-    tcs, reduced, red_rhs = [], [], []
-    for g, mat in zip(cs.groups, mats, strict=True):
-        k, r = g.k, g.rows
-        rows = cs.row_offset[g.closures][:, None] + np.arange(r)  # (G, r)
-        t = mat[:, k + s : k + s + r]  # (r, r, G, N)
-        tc = np.einsum("qjgn,jgn->qgn", t, c[rows.T])  # (r, G, N)
-        tcs.append(tc)
-        if s:
-            reduced.append(np.moveaxis(mat[k:, k : k + s], 2, 1).reshape(-1, s, n))
-            red_rhs.append(np.moveaxis(tc[k:], 1, 0).reshape(-1, n))  # (group, row)
-    x_s = None
-    if s:
-        red = np.concatenate(reduced)  # (s, s, N)
-        rhs = np.concatenate(red_rhs)  # (s, N)
-        x_s = np.linalg.solve(red.transpose(2, 0, 1), rhs.T[:, :, None])[:, :, 0].T  # (s, N)
-        out[cs.shared] = x_s
-    for g, mat, tc in zip(cs.groups, mats, tcs, strict=True):
-        k = g.k
-        if not k:
-            continue
-        top = tc[:k]
-        if s:
-            top = top - np.einsum("ktgn,tn->kgn", mat[:k, k : k + s], x_s)
-        x = _back_substitute(mat[:k, :k], top)  # (k, G, N)
-        out[g.private.T] = x
-    return out
-
-
-def _back_substitute(u: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """x with u x = b, u upper triangular (k, k, ...) and b (k, ...)."""
-    k = u.shape[0]
-    x = np.empty_like(b)
-    for i in range(k - 1, -1, -1):
-        acc = b[i] - np.einsum("t...,t...->...", u[i, i + 1 :], x[i + 1 :]) if i < k - 1 else b[i]
-        x[i] = acc / u[i, i]
-    return x
 
 
 def _forward_substitute_transposed(u: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -14,8 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.closure_linearisation import ClosureLinearisation, ClosurePart
-from twin.kinematics_adjoint import adjoint_solve_factored, eliminated
+from twin.kinematics_adjoint import adjoint_solve
 from twin.kinematics_fast import (
     KinematicStructure,
     fast_kinematics,
@@ -85,9 +84,8 @@ def _aos(model, frames: TreeFrames, sites: np.ndarray) -> dict[str, np.ndarray]:
 
 def _chunk(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, plan
-) -> tuple[np.ndarray, ClosurePart | None]:
-    """(N, T*3, n) for the configurations ``qpos`` (N, nq), and what a first-order start of
-    the closure solve needs (None for a serial chain).
+) -> np.ndarray:
+    """(N, T*3, n) for the configurations ``qpos`` (N, nq).
 
     A parameter's screw moves a site it affects by ``t + w x (p - o)`` (translation ``t``,
     rotation ``w`` about the pivot ``o``), i.e. ``v + w x p`` with ``v = t - w x o``; the
@@ -114,7 +112,7 @@ def _chunk(
     y *= affected[None, 2 * nc :, :, None]
     y = y.transpose(3, 1, 0, 2).reshape(n_pose, n_t * 3, n_par)
     if cs is None:  # a serial chain: the explicit term is all
-        return y, None
+        return y
     axes, anchors = cs.dof_axes(frames)  # (3, n_free, N)
     lin = np.broadcast_to(axes[:, None], (3, n_t, *axes.shape[1:])).copy()
     rot = cs.dof_rot
@@ -124,8 +122,6 @@ def _chunk(
     jt = lin.transpose(2, 1, 0, 3).reshape(len(plan.free), n_t * 3, n_pose)  # (n_free, m, N)
     aff_a, aff_b = affected[:nc], affected[nc : 2 * nc]
     pa, pb = site_pos[:, :nc], site_pos[:, nc : 2 * nc]  # (3, C, N)
-    factor = eliminated(cs, frames, site_pos[:, : 2 * nc]) if cs.square else None
-    part = ClosurePart(frames, site_pos[:, : 2 * nc], factor, vn, wn, aff_a, aff_b)
     if not cs.square:
         # least squares over more closure equations than free dofs: dq = -J^+ c_pi
         c_pi = np.zeros((mech.n_closure, n_par, n_pose))
@@ -138,10 +134,10 @@ def _chunk(
             if c.kind == "weld":
                 c_pi[r0 + 3 : r0 + 6] = dw[:, i]
         dq = cs.solve(cs.matrices(frames, site_pos[:, : 2 * nc], -c_pi))  # (n_free, n, N)
-        return np.einsum("fmn,fkn->nmk", jt, dq) + y, part
+        return np.einsum("fmn,fkn->nmk", jt, dq) + y
     # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
     # sides per pose instead of one with a column per parameter
-    z = adjoint_solve_factored(cs, factor, jt)  # (n_closure, m, N)
+    z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, m, N)
     pos_rows = cs.row_offset[:, None] + np.arange(3)
     zc = z[pos_rows]  # (C, 3, m, N)
     flat = zc.reshape(nc, -1)
@@ -158,7 +154,7 @@ def _chunk(
         ma += (aff_a[welds] - aff_b[welds]).T @ zr
     ma = ma.reshape(n_par, 3, -1, n_pose)
     corr = np.einsum("kimn,ikn->nmk", za, vn) + np.einsum("kimn,ikn->nmk", ma, wn)
-    return y - corr, part
+    return y - corr
 
 
 def target_jacobian_batch(
@@ -171,28 +167,11 @@ def target_jacobian_batch(
     """d(targets)/d(parameters) at closed configurations ``qpos`` (N, nq): (N*T*3, n), rows
     pose-major then target then x, y, z (as ``targets.reshape(-1)``). ``mech`` carries the
     model with ``values`` injected; ``plan`` (from the nominal machine) may be reused."""
-    return target_jacobian_linearised(mech, params, values, qpos, plan)[0]
-
-
-def target_jacobian_linearised(
-    mech: Mechanism,
-    params: ParameterSet,
-    values: np.ndarray,
-    qpos: np.ndarray,
-    plan: JacobianPlan | None = None,
-) -> tuple[np.ndarray, ClosureLinearisation | None]:
-    """:func:`target_jacobian_batch` and the closure's linearisation at ``qpos`` (first-order
-    starts of the closure solve at nearby values; None for a serial chain)."""
     plan = plan or JacobianPlan.for_mechanism(mech)
     qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
-    values = np.array(values, dtype=float)
     with one_blas_thread():
-        chunks = [
-            (slice(i, i + CHUNK), _chunk(mech, params, values, qpos[i : i + CHUNK], plan))
+        parts = [
+            _chunk(mech, params, values, qpos[i : i + CHUNK], plan)
             for i in range(0, len(qpos), CHUNK)
         ]
-    jac = np.concatenate([c[1][0] for c in chunks]).reshape(-1, len(params))
-    if chunks[0][1][1] is None:
-        return jac, None
-    parts = tuple((sl, c[1]) for sl, c in chunks)
-    return jac, ClosureLinearisation(mech, values, qpos.copy(), parts)
+    return np.concatenate(parts).reshape(-1, len(params))
