@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -137,6 +138,7 @@ class ParameterSet:
             for k in range(n):
                 self.subtree[k, b] = self.body[k] in chain
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
+        self._local = threading.local()
 
     def __len__(self) -> int:
         return len(self.parameters)
@@ -188,8 +190,17 @@ class ParameterSet:
                 model.qpos0[model.jnt_qposadr[i]] -= v
         for b, w in self.rotation_vectors(values).items():
             model.body_quat[b] = quat_multiply(quat_from_rotvec(w), nominal.body_quat[b])
-        mujoco.mj_setConst(model, mujoco.MjData(model))
+        mujoco.mj_setConst(model, self._scratch_data(nominal))
         return model
+
+    def _scratch_data(self, nominal: mujoco.MjModel) -> mujoco.MjData:
+        """An MjData of ``nominal``'s sizes for mj_setConst, which resets and overwrites what
+        it uses (kept per thread: an estimator injects values at every evaluation)."""
+        held = getattr(self._local, "scratch", None)
+        if held is None or held[0] is not nominal:
+            held = (nominal, mujoco.MjData(nominal))
+            self._local.scratch = held
+        return held[1]
 
     # ----------------------------------------------------------------- screws
     def screws(

@@ -91,10 +91,7 @@ def _chunk(
     rotation ``w`` about the pivot ``o``), i.e. ``v + w x p`` with ``v = t - w x o``; the
     closures' rows are the differences of their two sites' motions (and of ``w`` for a weld's
     rotation). The implicit term ``-z^T c_pi`` (``z`` from the adjoint solve, one column per
-    target coordinate) is contracted without forming ``c_pi``: with ``D`` the structural
-    (closure, parameter) matrix of signed site incidences, ``z_c . (v + w x p) = (z_c) . v +
-    (p x z_c) . w``, summed over closures first (a small matrix product per pose chunk), then
-    dotted with each parameter's ``v`` and ``w``."""
+    target coordinate) is contracted without forming ``c_pi`` (:func:`_implicit_term`)."""
     m = mech.model
     fk = fast_kinematics(mech)
     frames = tree_frames(fk.tree, m, np.ascontiguousarray(qpos.T), fk.numbers())
@@ -120,9 +117,9 @@ def _chunk(
     lin[:, :, rot] = cross_soa(axes[:, None, rot], lever)
     lin *= plan.target_moves[None, :, :, None]
     jt = lin.transpose(2, 1, 0, 3).reshape(len(plan.free), n_t * 3, n_pose)  # (n_free, m, N)
-    aff_a, aff_b = affected[:nc], affected[nc : 2 * nc]
-    pa, pb = site_pos[:, :nc], site_pos[:, nc : 2 * nc]  # (3, C, N)
     if not cs.square:
+        aff_a, aff_b = affected[:nc], affected[nc : 2 * nc]
+        pa, pb = site_pos[:, :nc], site_pos[:, nc : 2 * nc]  # (3, C, N)
         # least squares over more closure equations than free dofs: dq = -J^+ c_pi
         c_pi = np.zeros((mech.n_closure, n_par, n_pose))
         da = (vn[:, None] + cross_soa(wn[:, None], pa[:, :, None])) * aff_a[None, :, :, None]
@@ -137,24 +134,37 @@ def _chunk(
         return np.einsum("fmn,fkn->nmk", jt, dq) + y
     # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
     # sides per pose instead of one with a column per parameter
-    z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, m, N)
-    pos_rows = cs.row_offset[:, None] + np.arange(3)
-    zc = z[pos_rows]  # (C, 3, m, N)
-    flat = zc.reshape(nc, -1)
-    za = ((aff_a - aff_b).T @ flat).reshape(n_par, 3, -1, n_pose)
-    ma = aff_a.T @ cross_soa(pa[:, :, None], zc.transpose(1, 0, 2, 3)).transpose(
-        1, 0, 2, 3
-    ).reshape(nc, -1)
-    ma -= aff_b.T @ cross_soa(pb[:, :, None], zc.transpose(1, 0, 2, 3)).transpose(
-        1, 0, 2, 3
-    ).reshape(nc, -1)
-    welds = np.flatnonzero(cs.weld)
-    if welds.size:
-        zr = z[cs.row_offset[welds][:, None] + np.arange(3, 6)].reshape(welds.size, -1)
-        ma += (aff_a[welds] - aff_b[welds]).T @ zr
-    ma = ma.reshape(n_par, 3, -1, n_pose)
-    corr = np.einsum("kimn,ikn->nmk", za, vn) + np.einsum("kimn,ikn->nmk", ma, wn)
-    return y - corr
+    z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, T*3, N)
+    return y - _implicit_term(cs, z, vn, wn, site_pos[:, : 2 * nc], affected[: 2 * nc])
+
+
+def _implicit_term(
+    cs, z: np.ndarray, v: np.ndarray, w: np.ndarray, site_pos: np.ndarray, affected: np.ndarray
+) -> np.ndarray:
+    """``z^T c_pi`` (N, T*3, n) without forming ``c_pi``: only the (closure site, parameter)
+    pairs that move contribute, ``+-z_c . (v + w x p)`` (the site's velocity under the
+    parameter's screw; + for a closure's first site, - for its second) and ``+-z_rot . w``
+    for a weld's rotation rows. ``z`` (n_closure, T*3, N), ``v``/``w`` (3, n, N),
+    ``site_pos`` (3, 2C, N), ``affected`` (2C, n)."""
+    nc = site_pos.shape[1] // 2
+    n_par, n_rhs, n_pose = v.shape[1], z.shape[1], z.shape[2]
+    site, k = np.nonzero(affected)  # the pairs that move, grouped by site
+    u = v[:, k] + cross_soa(w[:, k], site_pos[:, site])  # (3, P, N)
+    contrib = np.empty((len(k), n_rhs, n_pose))
+    for s in np.unique(site):
+        pairs = np.flatnonzero(site == s)
+        c = s % nc
+        r0 = cs.row_offset[c]
+        rows = 6 if cs.weld[c] else 3  # a weld's rotation rows pair with w
+        twist = np.concatenate([u[:, pairs], w[:, k[pairs]]])[:rows]  # (rows, p, N)
+        acc = np.einsum("imn,ipn->pmn", z[r0 : r0 + rows], twist)
+        contrib[pairs] = acc if s < nc else -acc
+    out = np.zeros((n_par, n_rhs, n_pose))
+    if np.unique(k).size == k.size:  # each parameter moves one closure site (the hexapod)
+        out[k] = contrib
+    else:
+        np.add.at(out, k, contrib)
+    return out.transpose(2, 1, 0)
 
 
 def target_jacobian_batch(
