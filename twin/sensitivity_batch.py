@@ -105,9 +105,11 @@ def _chunk(
     affected = params.site_affected(m, sites).astype(float)  # (S, n)
     n_pose, n_par, nc, n_t = len(qpos), len(params), len(closure_sites) // 2, len(targets)
     pt = site_pos[:, 2 * nc :]  # (3, T, N)
-    y = vn[:, None] + cross_soa(wn[:, None], pt[:, :, None])  # (3, T, n, N)
-    y *= affected[None, 2 * nc :, :, None]
-    y = y.transpose(3, 1, 0, 2).reshape(n_pose, n_t * 3, n_par)
+    ts, ks = np.nonzero(affected[2 * nc :])  # (target, parameter) pairs that move
+    y = np.zeros((n_t, 3, n_par, n_pose))
+    if ts.size:
+        y[ts, :, ks] = (vn[:, ks] + cross_soa(wn[:, ks], pt[:, ts])).transpose(1, 0, 2)
+    y = y.transpose(3, 0, 1, 2).reshape(n_pose, n_t * 3, n_par)
     if cs is None:  # a serial chain: the explicit term is all
         return y
     axes, anchors = cs.dof_axes(frames)  # (3, n_free, N)
