@@ -459,3 +459,16 @@ def test_inject_with_a_reused_scratch_equals_a_fresh_one():
     assert reused.keys() == fresh.keys() and len(fresh) > 100
     for k, v in fresh.items():
         np.testing.assert_array_equal(reused[k], v, err_msg=k)
+
+
+def test_parameter_set_copies_and_pickles():
+    """The per-thread scratch of injection stays behind: copies and pickles inject alike."""
+    import copy
+    import pickle
+
+    nominal = Mechanism.from_xml(HEXAPOD_XML)
+    params = load_parameter_set(ROOT / "models/hexapod_rrrprr.params.toml", nominal.model)
+    values = np.random.default_rng(1).uniform(-1e-3, 1e-3, len(params))
+    ref = params.inject(nominal.model, values).body_pos.copy()
+    for other in (copy.deepcopy(params), pickle.loads(pickle.dumps(params))):
+        np.testing.assert_array_equal(other.inject(nominal.model, values).body_pos, ref)

@@ -140,6 +140,15 @@ class ParameterSet:
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
         self._local = threading.local()
 
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        del state["_local"]  # per-thread scratch: not for copies or other processes
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._local = threading.local()
+
     def __len__(self) -> int:
         return len(self.parameters)
 
