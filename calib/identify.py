@@ -269,7 +269,8 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     rejected: tuple[Rejection, ...] = ()
     n_kept = n_readings
     opt = robust_options or RobustOptions()
-    if robust and suspect_outliers(res.residual, res.jacobian, n_readings, n_unknown, opt):
+    jtj = res.jacobian.T @ res.jacobian  # the screen's and the covariance's
+    if robust and suspect_outliers(res.residual, res.jacobian, n_readings, n_unknown, opt, jtj):
         rob = robust_fit(residual, jacobian, res.x, n_unknown, opt, n_readings)
         iterations += rob.iterations
         norms = np.linalg.norm(rob.residual[: 3 * n_readings].reshape(-1, 3), axis=1)
@@ -289,11 +290,11 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
             near = replace(base, initial_damping=min(base.initial_damping, 1e-6))
             res = levenberg_marquardt(residual, jacobian, rob.fit.x, near, (ClosureError,))
             iterations += res.iterations
+            jtj = res.jacobian.T @ res.jacobian
     m = 3 * n_kept
     r_meas = res.residual[:m]
     dof = max(m - n_unknown, 1)
     sigma2 = float(r_meas @ r_meas) / dof
-    jtj = res.jacobian.T @ res.jacobian
     cov = sigma2 * np.linalg.pinv(jtj)
     std = np.full(n, np.nan)
     std[free] = np.sqrt(np.clip(np.diag(cov)[:k], 0, None))

@@ -2,10 +2,10 @@
 
 Same mathematics as :func:`twin.sensitivity.target_jacobian` (screws of the parameters, the
 implicit-function theorem over the closures), computed for all poses together: the frames
-from the numpy kinematic tree (twin.kinematics_tree), the screws and site derivatives as
-arrays over poses and parameters, and ``dq/dpi = -(dc/dq)^-1 dc/dpi`` for every parameter at
-once by the per-closure elimination of twin.kinematics_reduced (one elimination, one column
-per parameter). The tests hold it equal to the per-pose function to round-off.
+from the numpy kinematic tree (twin.kinematics_tree), the screws as arrays over poses and
+parameters, and the implicit term ``-J_t (dc/dq)^-1 dc/dpi`` through one adjoint solve per
+target coordinate (twin.kinematics_adjoint), contracted only over the (site, parameter)
+pairs that move. The tests hold it equal to the per-pose function to round-off.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from twin.kinematics_fast import (
     kinematic_structure,
     one_blas_thread,
 )
-from twin.kinematics_reduced import cross_soa
+from twin.kinematics_reduced import ClosureStructure, cross_soa
 from twin.kinematics_tree import TreeFrames, tree_frames
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
@@ -141,7 +141,12 @@ def _chunk(
 
 
 def _implicit_term(
-    cs, z: np.ndarray, v: np.ndarray, w: np.ndarray, site_pos: np.ndarray, affected: np.ndarray
+    cs: ClosureStructure,
+    z: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    site_pos: np.ndarray,
+    affected: np.ndarray,
 ) -> np.ndarray:
     """``z^T c_pi`` (N, T*3, n) without forming ``c_pi``: only the (closure site, parameter)
     pairs that move contribute, ``+-z_c . (v + w x p)`` (the site's velocity under the
