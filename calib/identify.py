@@ -232,9 +232,11 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     def problem(rows: np.ndarray | None):
         """Residual and Jacobian of the readings' rows ``rows`` (None: all), then the prior's."""
 
-        def residual(z: np.ndarray) -> tuple[np.ndarray, Prediction]:
+        def residual(
+            z: np.ndarray, pred: Prediction | None = None
+        ) -> tuple[np.ndarray, Prediction]:
             x, reg = split(z)
-            pred = model.predict(x, commands)
+            pred = model.predict(x, commands) if pred is None else pred
             meas = measured if reg is None else reg.to_base(measured)
             r = (meas - pred.targets).reshape(-1)
             r = r if rows is None else r[rows]
@@ -242,9 +244,9 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
                 r = np.concatenate([r, -padded_rows(prior_w, z[:k] - x_start[free])[0]])
             return r, pred
 
-        def jacobian(z: np.ndarray, pred: Prediction) -> np.ndarray:
+        def jacobian(z: np.ndarray, pred: Prediction, geo: np.ndarray | None = None) -> np.ndarray:
             x, _ = split(z)
-            jac = -model.jacobian(x, pred)[:, free]
+            jac = -(model.jacobian(x, pred) if geo is None else geo)[:, free]
             if reg0 is not None:
                 jac = np.hstack([jac, registration_jacobian(reg0, z[k:], measured)])
             jac = jac if rows is None else jac[rows]
@@ -257,14 +259,18 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
 
     n_unknown = len(z_start)
     residual, jacobian = problem(None)
-    res = levenberg_marquardt(residual, jacobian, z_start, options, (ClosureError,))
+    # the model's prediction and Jacobian at the start (x_start, the registration's start)
+    # are the fit's first evaluation: no second closure solve and Jacobian for it
+    start = (residual(z_start, first)[0], jacobian(z_start, first, jac0))
+    res = levenberg_marquardt(residual, jacobian, z_start, options, (ClosureError,), start)
     iterations = res.iterations
     norms = np.linalg.norm(res.residual[: 3 * n_readings].reshape(-1, 3), axis=1)
     scale = robust_scale(norms, n_unknown)
     rejected: tuple[Rejection, ...] = ()
     n_kept = n_readings
     opt = robust_options or RobustOptions()
-    if robust and suspect_outliers(res.residual, res.jacobian, n_readings, n_unknown, opt):
+    jtj = res.jacobian.T @ res.jacobian  # the screen's and the covariance's
+    if robust and suspect_outliers(res.residual, res.jacobian, n_readings, n_unknown, opt, jtj):
         rob = robust_fit(residual, jacobian, res.x, n_unknown, opt, n_readings)
         iterations += rob.iterations
         norms = np.linalg.norm(rob.residual[: 3 * n_readings].reshape(-1, 3), axis=1)
@@ -284,11 +290,11 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
             near = replace(base, initial_damping=min(base.initial_damping, 1e-6))
             res = levenberg_marquardt(residual, jacobian, rob.fit.x, near, (ClosureError,))
             iterations += res.iterations
+            jtj = res.jacobian.T @ res.jacobian
     m = 3 * n_kept
     r_meas = res.residual[:m]
     dof = max(m - n_unknown, 1)
     sigma2 = float(r_meas @ r_meas) / dof
-    jtj = res.jacobian.T @ res.jacobian
     cov = sigma2 * np.linalg.pinv(jtj)
     std = np.full(n, np.nan)
     std[free] = np.sqrt(np.clip(np.diag(cov)[:k], 0, None))

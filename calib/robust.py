@@ -94,11 +94,17 @@ def robust_scale(norms: np.ndarray, n_free: int) -> float:
 
 
 def suspect_outliers(
-    residual: np.ndarray, jacobian: np.ndarray, n_readings: int, n_free: int, opt: RobustOptions
+    residual: np.ndarray,
+    jacobian: np.ndarray,
+    n_readings: int,
+    n_free: int,
+    opt: RobustOptions,
+    jtj: np.ndarray | None = None,
 ) -> bool:
     """Whether a least-squares fit (its residual and Jacobian, readings' rows first) may hide
     a gross outlier: some reading's deleted residual exceeds ``opt.screen`` times the
-    rejection limit (module docstring). A singular or non-finite case answers True."""
+    rejection limit (module docstring). A singular or non-finite case answers True.
+    ``jtj``: ``jacobian.T @ jacobian`` when the caller has it."""
     if opt.screen <= 0:
         return True
     rows = 3 * n_readings
@@ -106,7 +112,7 @@ def suspect_outliers(
     scale = robust_scale(np.linalg.norm(r, axis=1), n_free)
     limit = opt.screen * max(opt.threshold * scale, opt.floor_m)
     try:
-        cov = np.linalg.inv(jacobian.T @ jacobian)
+        cov = np.linalg.inv(jacobian.T @ jacobian if jtj is None else jtj)
     except np.linalg.LinAlgError:
         return True
     j = jacobian[:rows]

@@ -77,7 +77,7 @@ class Mechanism:
         self, model: mujoco.MjModel, name: str | None = None, masses_defaulted: bool = False
     ) -> None:
         self.model = model
-        self.data = mujoco.MjData(model)
+        self._data: mujoco.MjData | None = None
         self.name = name or model.names[: model.names.find(b"\0")].decode() or "model"
         self.masses_defaulted = bool(masses_defaulted)
         self._read_actuators()
@@ -226,6 +226,14 @@ class Mechanism:
             )
 
     # ----------------------------------------------------------------- helpers
+    @property
+    def data(self) -> mujoco.MjData:
+        """The model's MjData, made on first use (the batched kinematics never needs it, and
+        an estimator makes a mechanism for every parameter value it tries)."""
+        if self._data is None:
+            self._data = mujoco.MjData(self.model)
+        return self._data
+
     @property
     def is_serial(self) -> bool:
         """No closures: forward kinematics is direct."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -137,6 +138,16 @@ class ParameterSet:
             for k in range(n):
                 self.subtree[k, b] = self.body[k] in chain
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
+        self._local = threading.local()
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        del state["_local"]  # per-thread scratch: not for copies or other processes
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._local = threading.local()
 
     def __len__(self) -> int:
         return len(self.parameters)
@@ -188,8 +199,17 @@ class ParameterSet:
                 model.qpos0[model.jnt_qposadr[i]] -= v
         for b, w in self.rotation_vectors(values).items():
             model.body_quat[b] = quat_multiply(quat_from_rotvec(w), nominal.body_quat[b])
-        mujoco.mj_setConst(model, mujoco.MjData(model))
+        mujoco.mj_setConst(model, self._scratch_data(nominal))
         return model
+
+    def _scratch_data(self, nominal: mujoco.MjModel) -> mujoco.MjData:
+        """An MjData of ``nominal``'s sizes for mj_setConst, which resets and overwrites what
+        it uses (kept per thread: an estimator injects values at every evaluation)."""
+        held = getattr(self._local, "scratch", None)
+        if held is None or held[0] is not nominal:
+            held = (nominal, mujoco.MjData(nominal))
+            self._local.scratch = held
+        return held[1]
 
     # ----------------------------------------------------------------- screws
     def screws(
@@ -223,18 +243,23 @@ class ParameterSet:
                 t[k] = data.xaxis[i]
         return t, w, o
 
-    def screws_batch(
-        self, model: mujoco.MjModel, frames: dict[str, np.ndarray], values: np.ndarray
+    def screws_soa(
+        self,
+        model: mujoco.MjModel,
+        xpos: np.ndarray,
+        xmat: np.ndarray,
+        xanchor: np.ndarray,
+        xaxis: np.ndarray,
+        values: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`screws` for N poses at once, each (N, n, 3), from their frames
-        (``xpos``, ``xmat``, ``xaxis``, ``xanchor`` with a leading pose axis)."""
-        xpos, xaxis, xanchor = frames["xpos"], frames["xaxis"], frames["xanchor"]
-        xmat = frames["xmat"].reshape(len(xpos), -1, 3, 3)
-        n_pose, n = len(xpos), len(self)
-        t, w, o = (np.zeros((n_pose, n, 3)) for _ in range(3))
+        """:meth:`screws` for N poses at once, each (3, n, N), from frames with the poses
+        last: ``xpos`` (3, nbody, N), ``xmat`` (3, 3, nbody, N), ``xanchor`` and ``xaxis``
+        (3, njnt, N) (twin.kinematics_tree.TreeFrames)."""
+        n_pose, n = xpos.shape[-1], len(self)
+        t, w, o = (np.zeros((3, n, n_pose)) for _ in range(3))
         kind, el, axis = self.kind, self.element, self.axis
         k0 = np.flatnonzero(kind == 0)
-        t[:, k0] = np.einsum("pkij,kj->pki", xmat[:, model.body_parentid[el[k0]]], axis[k0])
+        t[:, k0] = np.einsum("ijkn,kj->ikn", xmat[:, :, model.body_parentid[el[k0]]], axis[k0])
         k1 = np.flatnonzero(kind == 1)
         if k1.size:
             rotvecs = self.rotation_vectors(np.asarray(values, dtype=float))
@@ -242,12 +267,12 @@ class ParameterSet:
                 [left_jacobian_so3(rotvecs[int(el[k])]) @ axis[k] for k in k1]
             ).reshape(-1, 3)
             par = model.body_parentid[el[k1]]
-            w[:, k1] = np.einsum("pkij,kj->pki", xmat[:, par], local)
+            w[:, k1] = np.einsum("ijkn,kj->ikn", xmat[:, :, par], local)
             o[:, k1] = xpos[:, par] + np.einsum(
-                "pkij,kj->pki", xmat[:, par], model.body_pos[el[k1]]
+                "ijkn,kj->ikn", xmat[:, :, par], model.body_pos[el[k1]]
             )
         k2 = np.flatnonzero(kind == 2)
-        t[:, k2] = np.einsum("pkij,kj->pki", xmat[:, model.site_bodyid[el[k2]]], axis[k2])
+        t[:, k2] = np.einsum("ijkn,kj->ikn", xmat[:, :, model.site_bodyid[el[k2]]], axis[k2])
         k3 = np.flatnonzero(kind == 3)
         hinge, slide = k3[self.is_angle[k3]], k3[~self.is_angle[k3]]
         w[:, hinge] = xaxis[:, el[hinge]]
@@ -255,32 +280,14 @@ class ParameterSet:
         t[:, slide] = xaxis[:, el[slide]]
         return t, w, o
 
-    def site_derivatives_batch(
-        self,
-        model: mujoco.MjModel,
-        site_xpos: np.ndarray,
-        sites: np.ndarray,
-        screws: tuple[np.ndarray, np.ndarray, np.ndarray],
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`site_derivatives` for N poses: dp and dw, each (N, S, 3, n); ``site_xpos``
-        (N, nsite, 3) and ``screws`` from :meth:`screws_batch`."""
-        t, w, o = screws
+    def site_affected(self, model: mujoco.MjModel, sites: np.ndarray) -> np.ndarray:
+        """(S, n) bool: the parameter moves the site (a body parameter every site of its
+        subtree, a site parameter its own site only)."""
         sites = np.asarray(sites, dtype=int)
-        n_pose, n = len(site_xpos), len(self)
         affected = self.subtree[:, model.site_bodyid[sites]].T.copy()  # (S, n)
         site_kind = self.kind == 2
         affected[:, site_kind] = sites[:, None] == self.element[site_kind][None, :]
-        si, k = np.nonzero(affected)  # only the (site, parameter) pairs that move
-        lever = site_xpos[:, sites[si]] - o[:, k]  # (N, P, 3)
-        wk = w[:, k]
-        cross = (
-            wk[..., [1, 2, 0]] * lever[..., [2, 0, 1]] - wk[..., [2, 0, 1]] * lever[..., [1, 2, 0]]
-        )
-        dp = np.zeros((n_pose, len(sites), n, 3))
-        dw = np.zeros((n_pose, len(sites), n, 3))
-        dp[:, si, k] = t[:, k] + cross
-        dw[:, si, k] = wk
-        return np.swapaxes(dp, 2, 3), np.swapaxes(dw, 2, 3)
+        return affected
 
     def site_derivatives(
         self,
@@ -294,9 +301,7 @@ class ParameterSet:
         t, w, o = screws if screws is not None else self.screws(model, data, values)
         sites = np.asarray(sites, dtype=int)
         p = data.site_xpos[sites]  # (S,3)
-        affected = self.subtree[:, model.site_bodyid[sites]].T.copy()  # (S,n)
-        site_kind = self.kind == 2
-        affected[:, site_kind] = sites[:, None] == self.element[site_kind][None, :]
+        affected = self.site_affected(model, sites)
         dp = t[None, :, :] + np.cross(w[None, :, :], p[:, None, :] - o[None, :, :])  # (S,n,3)
         dp *= affected[:, :, None]
         dw = w[None, :, :] * affected[:, :, None]

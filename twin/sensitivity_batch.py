@@ -2,10 +2,10 @@
 
 Same mathematics as :func:`twin.sensitivity.target_jacobian` (screws of the parameters, the
 implicit-function theorem over the closures), computed for all poses together: the frames
-from the numpy kinematic tree (twin.kinematics_tree), the screws and site derivatives as
-arrays over poses and parameters, and ``dq/dpi = -(dc/dq)^-1 dc/dpi`` for every parameter at
-once by the per-closure elimination of twin.kinematics_reduced (one elimination, one column
-per parameter). The tests hold it equal to the per-pose function to round-off.
+from the numpy kinematic tree (twin.kinematics_tree), the screws as arrays over poses and
+parameters, and the implicit term ``-J_t (dc/dq)^-1 dc/dpi`` through one adjoint solve per
+target coordinate (twin.kinematics_adjoint), contracted only over the (site, parameter)
+pairs that move. The tests hold it equal to the per-pose function to round-off.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from twin.kinematics_fast import (
     kinematic_structure,
     one_blas_thread,
 )
-from twin.kinematics_reduced import cross_soa
+from twin.kinematics_reduced import ClosureStructure, cross_soa
 from twin.kinematics_tree import TreeFrames, tree_frames
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
@@ -82,53 +82,96 @@ def _aos(model, frames: TreeFrames, sites: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _closure_rows(mech: Mechanism, dpos: np.ndarray, drot: np.ndarray) -> np.ndarray:
-    """Per-closure position and rotation rows (N, C, 3, k) stacked in residual order."""
-    out = np.empty((dpos.shape[0], mech.n_closure, dpos.shape[-1]))
-    row = 0
-    for i, c in enumerate(mech.closures):
-        out[:, row : row + 3] = dpos[:, i]
-        if c.kind == "weld":
-            out[:, row + 3 : row + 6] = drot[:, i]
-        row += c.size
-    return out
-
-
 def _chunk(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, plan
 ) -> np.ndarray:
+    """(N, T*3, n) for the configurations ``qpos`` (N, nq).
+
+    A parameter's screw moves a site it affects by ``t + w x (p - o)`` (translation ``t``,
+    rotation ``w`` about the pivot ``o``), i.e. ``v + w x p`` with ``v = t - w x o``; the
+    closures' rows are the differences of their two sites' motions (and of ``w`` for a weld's
+    rotation). The implicit term ``-z^T c_pi`` (``z`` from the adjoint solve, one column per
+    target coordinate) is contracted without forming ``c_pi`` (:func:`_implicit_term`)."""
     m = mech.model
     fk = fast_kinematics(mech)
     frames = tree_frames(fk.tree, m, np.ascontiguousarray(qpos.T), fk.numbers())
     cs = fk.closure
-    targets = mech.target_sites
+    targets = np.asarray(mech.target_sites, dtype=int)
     closure_sites = cs.sites if cs is not None else np.zeros(0, dtype=int)
     sites = np.concatenate([closure_sites, targets]).astype(int)
-    aos = _aos(m, frames, sites)
-    screws = params.screws_batch(m, aos, values)
-    dp, dw = params.site_derivatives_batch(m, aos["site_xpos"], sites, screws)
-    n_pose, n_par, nc = len(qpos), len(params), len(closure_sites) // 2
-    y = dp[:, 2 * nc :].reshape(n_pose, -1, n_par)
+    t, wn, o = params.screws_soa(m, frames.xpos, frames.xmat, frames.xanchor, frames.xaxis, values)
+    vn = t - cross_soa(wn, o)  # (3, n, N)
+    site_pos = frames.site_positions(m, sites)  # (3, S, N)
+    affected = params.site_affected(m, sites).astype(float)  # (S, n)
+    n_pose, n_par, nc, n_t = len(qpos), len(params), len(closure_sites) // 2, len(targets)
+    pt = site_pos[:, 2 * nc :]  # (3, T, N)
+    ts, ks = np.nonzero(affected[2 * nc :])  # (target, parameter) pairs that move
+    y = np.zeros((n_t, 3, n_par, n_pose))
+    if ts.size:
+        y[ts, :, ks] = (vn[:, ks] + cross_soa(wn[:, ks], pt[:, ts])).transpose(1, 0, 2)
+    y = y.transpose(3, 0, 1, 2).reshape(n_pose, n_t * 3, n_par)
     if cs is None:  # a serial chain: the explicit term is all
         return y
-    c_pi = _closure_rows(mech, dp[:, :nc] - dp[:, nc : 2 * nc], dw[:, :nc] - dw[:, nc : 2 * nc])
-    site_pos = aos["site_xpos"][:, sites].transpose(2, 1, 0)  # (3, S, N)
     axes, anchors = cs.dof_axes(frames)  # (3, n_free, N)
-    pt = site_pos[:, 2 * nc :]  # (3, T, N)
-    lin = np.broadcast_to(axes[:, None], (3, len(targets), *axes.shape[1:])).copy()
+    lin = np.broadcast_to(axes[:, None], (3, n_t, *axes.shape[1:])).copy()
     rot = cs.dof_rot
     lever = pt[:, :, None] - anchors[:, None, rot]
     lin[:, :, rot] = cross_soa(axes[:, None, rot], lever)
     lin *= plan.target_moves[None, :, :, None]
-    jt = lin.transpose(3, 1, 0, 2).reshape(n_pose, -1, len(plan.free))  # (N, T*3, n_free)
-    if cs.square:
-        # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
-        # sides per pose instead of one with a column per parameter
-        z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt.transpose(2, 1, 0))
-        return y - z.transpose(2, 1, 0) @ c_pi
-    mats = cs.matrices(frames, site_pos[:, : 2 * nc], -c_pi.transpose(1, 2, 0))
-    dq = cs.solve(mats)  # (n_free, n_par, N), least squares
-    return jt @ dq.transpose(2, 0, 1) + y
+    jt = lin.transpose(2, 1, 0, 3).reshape(len(plan.free), n_t * 3, n_pose)  # (n_free, m, N)
+    if not cs.square:
+        aff_a, aff_b = affected[:nc], affected[nc : 2 * nc]
+        pa, pb = site_pos[:, :nc], site_pos[:, nc : 2 * nc]  # (3, C, N)
+        # least squares over more closure equations than free dofs: dq = -J^+ c_pi
+        c_pi = np.zeros((mech.n_closure, n_par, n_pose))
+        da = (vn[:, None] + cross_soa(wn[:, None], pa[:, :, None])) * aff_a[None, :, :, None]
+        db = (vn[:, None] + cross_soa(wn[:, None], pb[:, :, None])) * aff_b[None, :, :, None]
+        dw = wn[:, None] * (aff_a - aff_b)[None, :, :, None]
+        for i, c in enumerate(mech.closures):
+            r0 = cs.row_offset[i]
+            c_pi[r0 : r0 + 3] = da[:, i] - db[:, i]
+            if c.kind == "weld":
+                c_pi[r0 + 3 : r0 + 6] = dw[:, i]
+        dq = cs.solve(cs.matrices(frames, site_pos[:, : 2 * nc], -c_pi))  # (n_free, n, N)
+        return np.einsum("fmn,fkn->nmk", jt, dq) + y
+    # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
+    # sides per pose instead of one with a column per parameter
+    z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, T*3, N)
+    return y - _implicit_term(cs, z, vn, wn, site_pos[:, : 2 * nc], affected[: 2 * nc])
+
+
+def _implicit_term(
+    cs: ClosureStructure,
+    z: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    site_pos: np.ndarray,
+    affected: np.ndarray,
+) -> np.ndarray:
+    """``z^T c_pi`` (N, T*3, n) without forming ``c_pi``: only the (closure site, parameter)
+    pairs that move contribute, ``+-z_c . (v + w x p)`` (the site's velocity under the
+    parameter's screw; + for a closure's first site, - for its second) and ``+-z_rot . w``
+    for a weld's rotation rows. ``z`` (n_closure, T*3, N), ``v``/``w`` (3, n, N),
+    ``site_pos`` (3, 2C, N), ``affected`` (2C, n)."""
+    nc = site_pos.shape[1] // 2
+    n_par, n_rhs, n_pose = v.shape[1], z.shape[1], z.shape[2]
+    site, k = np.nonzero(affected)  # the pairs that move, grouped by site
+    u = v[:, k] + cross_soa(w[:, k], site_pos[:, site])  # (3, P, N)
+    contrib = np.empty((len(k), n_rhs, n_pose))
+    for s in np.unique(site):
+        pairs = np.flatnonzero(site == s)
+        c = s % nc
+        r0 = cs.row_offset[c]
+        rows = 6 if cs.weld[c] else 3  # a weld's rotation rows pair with w
+        twist = np.concatenate([u[:, pairs], w[:, k[pairs]]])[:rows]  # (rows, p, N)
+        acc = np.einsum("imn,ipn->pmn", z[r0 : r0 + rows], twist)
+        contrib[pairs] = acc if s < nc else -acc
+    out = np.zeros((n_par, n_rhs, n_pose))
+    if np.unique(k).size == k.size:  # each parameter moves one closure site (the hexapod)
+        out[k] = contrib
+    else:
+        np.add.at(out, k, contrib)
+    return out.transpose(2, 1, 0)
 
 
 def target_jacobian_batch(

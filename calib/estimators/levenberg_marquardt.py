@@ -57,18 +57,24 @@ def levenberg_marquardt(
     x0: np.ndarray,
     options: LMOptions | None = None,
     recoverable: tuple[type[BaseException], ...] = (),
+    start: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> LMResult:
     """Minimise ``|r(x)|^2``; ``residual(x)`` returns (r, state), ``jacobian(x, state)`` dr/dx.
 
     ``recoverable`` lists exceptions that make a trial step fail instead of the whole solve.
+    ``start``: the residual and Jacobian at ``x0`` when the caller has them already (they
+    must be what ``residual`` and ``jacobian`` return there), saving their evaluation.
     """
     opt = options or LMOptions()
     x = np.array(x0, dtype=float)
-    r, state = residual(x)
+    if start is None:
+        r, state = residual(x)
+        jac = jacobian(x, state)
+    else:
+        r, jac = start
     cost = 0.5 * float(r @ r)
     history = [cost]
     damping, nu = opt.initial_damping, 2.0
-    jac = jacobian(x, state)
     for it in range(1, opt.max_iterations + 1):
         scale = np.linalg.norm(jac, axis=0)
         scale = np.where(scale > 0, scale, 1.0)
