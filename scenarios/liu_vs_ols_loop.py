@@ -58,6 +58,7 @@ class Loop:
             },
             "lm_iterations": self.fit.iterations,
             "lm_converged": self.fit.converged,
+            "gauss_newton_polish_steps": self.fit.polish_steps,
             "notes": list(d.notes),
         }
 

@@ -7,7 +7,6 @@ and the nominal model. Scoring uses ``bench.true_targets`` (where the targets re
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -145,17 +144,15 @@ def estimator_label(entry: str | dict[str, Any]) -> str:
     return entry if isinstance(entry, str) else entry["label"]
 
 
-def run_estimators(
-    problem: FineProblem, entries: list, keep_blas: tuple[str, ...] = ()
-) -> dict[str, tuple[LinearEstimate, Any]]:
+def run_estimators(problem: FineProblem, entries: list) -> dict[str, tuple[LinearEstimate, Any]]:
     """Each entry: "ols", or a table {label = "liu_k1", method = "liu", k = 1.0}.
 
-    Each runs on one BLAS thread (small matrices), except the labels in ``keep_blas``, which
-    keep the caller's BLAS setting (see :func:`calibrate`)."""
+    Each runs on one BLAS thread (small matrices; the same numbers whatever the caller's
+    BLAS setting)."""
     out = {}
     for entry in entries:
         label = estimator_label(entry)
-        with contextlib.nullcontext() if label in keep_blas else one_blas_thread():
+        with one_blas_thread():
             if isinstance(entry, str):
                 out[entry] = estimate(problem, entry)
             else:
@@ -171,10 +168,7 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
     fine_nodes = sc.get("fine.nodes_per_side", int)
     if progress is not None:
         progress.step(f"coarse calibration: middle layer, {coarse_nodes} x {coarse_nodes} nodes")
-    # the coarse and fine problems and the estimators on one BLAS thread (small matrices),
-    # except the estimator the loop starts from: it keeps the caller's BLAS setting, since
-    # the loop's refit turns the last bits of its start (1e-12 relative between one and two
-    # threads) into 1e-9..1e-6 relative changes of the effect's coefficients
+    # the coarse and fine problems and the estimators on one BLAS thread (small matrices)
     with one_blas_thread():
         coarse = coarse_calibration(
             bench.model,
@@ -203,8 +197,7 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
     with one_blas_thread():
         problem = fine_problem(bench.model, coarse.values, bench.encoder, fine_poses, measure)
     ((cmds, readings),) = seen
-    loop_estimator = sc.get("loop.estimator", str, "ols")
-    estimates = run_estimators(problem, entries, keep_blas=(loop_estimator,))
+    estimates = run_estimators(problem, entries)
     return Calibration(coarse, fine_poses, order, cmds, readings, problem, estimates)
 
 
