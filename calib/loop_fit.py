@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.diagnosis import actuator_jacobians
+from calib.diagnosis_apply import actuator_jacobians_batch
 from calib.estimators.levenberg_marquardt import LMOptions, levenberg_marquardt
 from calib.loop_effect import ActuatorCorrection
 from calib.model import CalibrationModel
@@ -83,7 +83,7 @@ def fit_with_effect(
         j_geo = model.jacobian(x, pred)[:, cols]
         if not k:
             return -j_geo
-        j_act = actuator_jacobians(model, x, pred.qpos)  # (N, T*3, A)
+        j_act = actuator_jacobians_batch(model, x, pred.qpos)  # (N, T*3, A)
         j_eff = np.einsum("nra,nak->nrk", j_act, d).reshape(-1, k)
         return -np.hstack([j_geo, j_eff])
 
