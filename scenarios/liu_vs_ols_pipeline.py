@@ -22,9 +22,10 @@ from scenarios.config import Scenario
 from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
 from twin.kinematics_batch import forward_batch
 from twin.kinematics_fast import one_blas_thread
+from twin.kinematics_inverse_batch import commands_near
 from twin.measurement import measure as twin_measure
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import checked_commands, commands_for_poses, layer_poses
+from twin.workspace import checked_commands, layer_poses
 
 # First paper, Table 5 (experiment, "pose errors after calibration in three measurement
 # layers") and section 5 (simulation).
@@ -219,7 +220,8 @@ def stage_commands(
         comp = TwistCompensation.prepare(bench.model, cal.coarse.values, poses)
     coarse_mech = bench.model.mechanism(cal.coarse.values)
     out = {
-        "uncalibrated": commands_for_poses(nominal, poses),  # before any calibration
+        # before any calibration: commands_for_poses's, solved from the coarse model's
+        "uncalibrated": commands_near(nominal, poses, comp.qpos, comp.actuator_jacobians),
         "coarse": checked_commands(coarse_mech, poses, comp.qpos[:, coarse_mech.actuator_qpos]),
     }
     deltas = {m: est.x for m, (est, _) in cal.estimates.items() if stages is None or m in stages}

@@ -9,9 +9,10 @@ import pytest
 
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import forward, inverse
-from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
+from twin.kinematics_inverse_batch import actuator_twist_jacobians, commands_near, inverse_near
 from twin.mechanism import Mechanism
 from twin.rotations import rpy_from_matrix
+from twin.workspace import commands_for_poses, workspace_box
 
 ROOT = Path(__file__).resolve().parent.parent
 MACHINES = ["hexapod_rrrprr.xml", "polisher.xml", "arm6r.xml"]
@@ -71,3 +72,23 @@ def test_unreachable_poses_raise_as_the_per_pose_solver():
         inverse_near(narrow, moved, start)
     c, _ = inverse_near(narrow, moved, start, check_stroke=False)
     np.testing.assert_allclose(c, inverse_near(mech, moved, start)[0], atol=0)
+
+
+@pytest.mark.parametrize("xml", ["polisher.xml", "hexapod_rrrprr.xml"])
+def test_commands_near_equal_commands_for_poses_on_another_model(xml):
+    """Solved from the configurations of a model 1 mm / 1 mrad away, as liu_vs_ols solves the
+    uncalibrated and the loop's commands from the controller's model."""
+    mech = Mechanism.from_xml(ROOT / "models" / xml)
+    lo, hi = workspace_box(mech)
+    rng = np.random.default_rng(13)
+    poses = lo + (hi - lo) * rng.uniform(0.3, 0.7, (5, 6))
+    other = Mechanism.from_xml(ROOT / "models" / xml)
+    other.model.body_pos[1:] += rng.uniform(-1e-3, 1e-3, other.model.body_pos[1:].shape)
+    start = np.array([inverse(other, p).qpos for p in poses])
+    jac = actuator_twist_jacobians(other, start)
+    expected = commands_for_poses(mech, poses)
+    np.testing.assert_allclose(commands_near(mech, poses, start, jac), expected, atol=1e-12)
+    far = poses.copy()
+    far[3, 0] = 10.0
+    with pytest.raises(WorkspaceError, match="pose 3"):
+        commands_near(mech, far, start, jac)

@@ -20,6 +20,8 @@ twin.kinematics.inverse.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from twin.exceptions import ClosureError, WorkspaceError
@@ -30,6 +32,7 @@ from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import rotvec_from_matrix
 from twin.sensitivity import tool_twist_jacobian
+from twin.workspace import _check_labels, _pose_name, check_pose_in_box, stroke_problem
 
 MAX_STEPS = 12
 STALL = 0.5  # a step that does not halve the largest tool error ends a pose's iteration
@@ -143,3 +146,39 @@ def _one_by_one(
         sol = inverse(mech, poses[i], start=start[i], check_stroke=False)
         c[k], q[k] = sol.actuators, sol.qpos
     return c, q
+
+
+def commands_near(
+    mech: Mechanism,
+    poses: np.ndarray,
+    start: np.ndarray,
+    jacobians: np.ndarray | None = None,
+    labels: Sequence[object] | None = None,
+) -> np.ndarray:
+    """:func:`twin.workspace.commands_for_poses` (box check, inverse kinematics, stroke
+    check; errors name the pose) with every pose solved at once from a nearby configuration
+    ``start`` (N, nq), e.g. the same poses solved on a model a calibration's estimate away;
+    ``jacobians`` (N, 6, A) at ``start`` (or near it: the chord step only needs them
+    approximately). Equal to commands_for_poses's solution to round-off where both start on
+    the same assembly branch."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    _check_labels(labels, len(poses))
+    for i, p in enumerate(poses):
+        try:
+            check_pose_in_box(mech, p)
+        except WorkspaceError as exc:
+            raise WorkspaceError(f"{_pose_name(i, labels)}: {exc}") from None
+    try:
+        out = inverse_near(mech, poses, start, jacobians, check_stroke=False)[0]
+    except (WorkspaceError, ClosureError):  # name the pose: solve them one by one
+        out = np.empty((len(poses), mech.n_actuators))
+        for i, p in enumerate(poses):
+            try:
+                out[i] = inverse(mech, p, start=start[i], check_stroke=False).actuators
+            except (WorkspaceError, ClosureError) as exc:
+                raise type(exc)(f"{_pose_name(i, labels)}: {exc}") from None
+    for i, c in enumerate(out):
+        problem = stroke_problem(mech, c)
+        if problem:
+            raise WorkspaceError(f"{_pose_name(i, labels)}: not reachable: {problem}")
+    return out
