@@ -16,7 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.diagnosis_apply import actuator_jacobians_batch
-from calib.estimators.levenberg_marquardt import LMOptions, levenberg_marquardt
+from calib.estimators.levenberg_marquardt import (
+    JacobianFn,
+    LMOptions,
+    ResidualFn,
+    levenberg_marquardt,
+)
 from calib.loop_effect import ActuatorCorrection
 from calib.model import CalibrationModel
 from twin.exceptions import ClosureError
@@ -35,7 +40,7 @@ class LoopFit:
     residual_rms_3d_m: float  # RMS over readings of the 3D residual per target reading
     iterations: int
     converged: bool
-    std_errors: np.ndarray  # (len(columns) + k,) SI, from the residual and J^T J
+    std_errors: np.ndarray  # (len(columns) + k,) SI, from the residual and the SVD of J
     polish_steps: int = 0  # Gauss-Newton steps after Levenberg-Marquardt
 
 
@@ -126,8 +131,8 @@ def std_errors(residual: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
 
 
 def gauss_newton_polish(
-    residual,
-    jacobian,
+    residual: ResidualFn,
+    jacobian: JacobianFn,
     z: np.ndarray,
     r: np.ndarray,
     jac: np.ndarray,
@@ -141,7 +146,7 @@ def gauss_newton_polish(
     Levenberg-Marquardt stops once the Gauss-Newton step predicts a relative cost decrease
     below 1e-10, which, at the loop's noise floor, leaves it up to ~1e-4 standard errors from
     the minimum, wherever its path ended: a start changed by 1e-12 relative (one BLAS thread
-    or two) moved the effect's coefficients by 1e-9..5e-8 relative. The steps contract by
+    or two) moved the effect's coefficients by up to 3e-7 relative. The steps contract by
     some 18x each, so the end point is the minimum to ~1e-10 standard errors, whatever the
     start. A step that fails to evaluate (no closure) ends the polish at the last point."""
     for step_no in range(1, max_steps + 1):
