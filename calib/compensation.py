@@ -15,6 +15,7 @@ import numpy as np
 from calib.model import CalibrationModel
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import inverse
+from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
 from twin.sensitivity import tool_twist_jacobian
 from twin.workspace import commands_for_poses
@@ -59,6 +60,7 @@ class TwistCompensation:
     poses: np.ndarray  # (N, 6)
     qpos: np.ndarray  # (N, nq) the first inverse kinematics of each pose
     twist_jacobians: np.ndarray  # (N, 6, n) d(tool twist)/d(every parameter)
+    actuator_jacobians: np.ndarray  # (N, 6, A) d(tool twist)/d(actuator joints) at qpos
 
     @classmethod
     def prepare(
@@ -75,19 +77,20 @@ class TwistCompensation:
             qpos[i] = sol.qpos
             jac[i] = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)
             q = sol.qpos
-        return cls(model, base_values, poses, qpos, jac)
+        return cls(model, base_values, poses, qpos, jac, actuator_twist_jacobians(mech, qpos))
 
     def commands(self, delta: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """Commands (N, A) for the poses corrected by the predicted twist ``B[:, columns]
         delta`` of the estimate ``delta`` (SI, one value per column)."""
         mech = self.model.mechanism(self.base_values)
         twists = self.twist_jacobians[:, :, np.asarray(columns)] @ np.asarray(delta, dtype=float)
-        out = np.empty((len(self.poses), mech.n_actuators))
+        corrected = np.empty_like(self.poses)
         for i, (pose, twist) in enumerate(zip(self.poses, twists, strict=True)):
             r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
-            corrected = np.concatenate([pose[:3] - twist[:3], r_cmd])
-            out[i] = inverse(mech, corrected, start=self.qpos[i]).actuators
-        return out
+            corrected[i] = np.concatenate([pose[:3] - twist[:3], r_cmd])
+        # every pose at once, each from its first inverse kinematics (the same exact inverse
+        # kinematics as twin.kinematics.inverse, to round-off; the same errors)
+        return inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
 
 
 def twist_compensated_commands(

@@ -23,6 +23,7 @@ from calib.diagnosis_context import actuator_offsets, build_context
 from calib.identify import IdentificationResult
 from calib.model import CalibrationModel
 from twin.sensitivity import target_jacobian
+from twin.sensitivity_batch import target_jacobian_batch
 
 
 def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
@@ -31,6 +32,16 @@ def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.nda
     offsets = actuator_offsets(model)
     zero = np.zeros(len(offsets))
     return np.array([target_jacobian(mech, offsets, zero, q) for q in qpos])
+
+
+def actuator_jacobians_batch(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
+    """:func:`actuator_jacobians` by the batched adjoint (twin.sensitivity_batch): the same
+    derivatives to round-off (1e-12 relative, tested), all poses at once."""
+    mech = model.mechanism(values)
+    offsets = actuator_offsets(model)
+    qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
+    jac = target_jacobian_batch(mech, offsets, np.zeros(len(offsets)), qpos)
+    return jac.reshape(len(qpos), -1, len(offsets))
 
 
 def kept_rows(result: IdentificationResult, shape: tuple[int, int]) -> np.ndarray:

@@ -19,6 +19,7 @@ import numpy as np
 from calib.exceptions import ConvergenceError
 from calib.loop_effect import ActuatorCorrection
 from calib.model import CalibrationModel
+from twin.kinematics_inverse_batch import commands_near
 from twin.workspace import commands_for_poses
 
 
@@ -60,9 +61,19 @@ def loop_commands(
     poses: np.ndarray,
     order: np.ndarray,
     tol: float = 1e-12,
+    near: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> LoopCommands:
     """Commands (N, A) that put the identified machine (geometry ``values`` with the
-    effect's correction) at ``poses`` (N, 6) measured in sequence ``order``."""
-    q_star = commands_for_poses(model.mechanism(values), poses)
+    effect's correction) at ``poses`` (N, 6) measured in sequence ``order``.
+
+    ``near``: closed configurations (N, nq) of the same poses on a nearby model (e.g. the
+    controller's, a calibration's estimate away) and their actuator twist Jacobians
+    (N, 6, A): the inverse kinematics then solves every pose at once from them
+    (twin.kinematics_inverse_batch.commands_near, the same solutions to round-off)."""
+    mech = model.mechanism(values)
+    if near is None:
+        q_star = commands_for_poses(mech, poses)
+    else:
+        q_star = commands_near(mech, poses, *near)
     c, it, change = invert_correction(correction, q_star, np.asarray(order), tol)
     return LoopCommands(c, q_star, it, change)

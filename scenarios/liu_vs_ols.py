@@ -179,7 +179,8 @@ def run(
     cmds: dict[str, dict[str, Any]] = {}
     for group, p in poses.items():
         cmds[group] = stage_commands(bench, cal, p, comp=comps[group])
-        cmds[group]["loop"] = lambda order, p=p: loop.commands(bench, p, order)
+        near = (comps[group].qpos, comps[group].actuator_jacobians)
+        cmds[group]["loop"] = lambda order, p=p, near=near: loop.commands(bench, p, order, near)
     with one_blas_thread():
         layers, maps = score(bench, poses, cmds)
 

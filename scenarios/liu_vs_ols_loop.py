@@ -33,9 +33,17 @@ class Loop:
     residual_rms_after_mm: float  # 3D per reading, geometry and effect refitted
     noise_floor_rms_mm: float  # 3D per reading of the tracker noise: sqrt(3) sigma / sqrt(n)
 
-    def commands(self, bench: Bench, poses: np.ndarray, order: np.ndarray) -> np.ndarray:
+    def commands(
+        self,
+        bench: Bench,
+        poses: np.ndarray,
+        order: np.ndarray,
+        near: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
+        """``near``: the poses' configurations and actuator twist Jacobians on a nearby model
+        (see calib.loop_compensation.loop_commands)."""
         return loop_commands(
-            bench.model, self.fit.values, self.fit.correction, poses, order
+            bench.model, self.fit.values, self.fit.correction, poses, order, near=near
         ).commands
 
     def summary(self) -> dict[str, Any]:
@@ -58,6 +66,7 @@ class Loop:
             },
             "lm_iterations": self.fit.iterations,
             "lm_converged": self.fit.converged,
+            "gauss_newton_polish_steps": self.fit.polish_steps,
             "notes": list(d.notes),
         }
 

@@ -7,7 +7,6 @@ and the nominal model. Scoring uses ``bench.true_targets`` (where the targets re
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,9 +22,10 @@ from scenarios.config import Scenario
 from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
 from twin.kinematics_batch import forward_batch
 from twin.kinematics_fast import one_blas_thread
+from twin.kinematics_inverse_batch import commands_near
 from twin.measurement import measure as twin_measure
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import checked_commands, commands_for_poses, layer_poses
+from twin.workspace import checked_commands, layer_poses
 
 # First paper, Table 5 (experiment, "pose errors after calibration in three measurement
 # layers") and section 5 (simulation).
@@ -145,17 +145,15 @@ def estimator_label(entry: str | dict[str, Any]) -> str:
     return entry if isinstance(entry, str) else entry["label"]
 
 
-def run_estimators(
-    problem: FineProblem, entries: list, keep_blas: tuple[str, ...] = ()
-) -> dict[str, tuple[LinearEstimate, Any]]:
+def run_estimators(problem: FineProblem, entries: list) -> dict[str, tuple[LinearEstimate, Any]]:
     """Each entry: "ols", or a table {label = "liu_k1", method = "liu", k = 1.0}.
 
-    Each runs on one BLAS thread (small matrices), except the labels in ``keep_blas``, which
-    keep the caller's BLAS setting (see :func:`calibrate`)."""
+    Each runs on one BLAS thread (small matrices; the same numbers whatever the caller's
+    BLAS setting)."""
     out = {}
     for entry in entries:
         label = estimator_label(entry)
-        with contextlib.nullcontext() if label in keep_blas else one_blas_thread():
+        with one_blas_thread():
             if isinstance(entry, str):
                 out[entry] = estimate(problem, entry)
             else:
@@ -171,10 +169,7 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
     fine_nodes = sc.get("fine.nodes_per_side", int)
     if progress is not None:
         progress.step(f"coarse calibration: middle layer, {coarse_nodes} x {coarse_nodes} nodes")
-    # the coarse and fine problems and the estimators on one BLAS thread (small matrices),
-    # except the estimator the loop starts from: it keeps the caller's BLAS setting, since
-    # the loop's refit turns the last bits of its start (1e-12 relative between one and two
-    # threads) into 1e-9..1e-6 relative changes of the effect's coefficients
+    # the coarse and fine problems and the estimators on one BLAS thread (small matrices)
     with one_blas_thread():
         coarse = coarse_calibration(
             bench.model,
@@ -203,8 +198,7 @@ def calibrate(bench: Bench, entries: list, progress=None) -> Calibration:
     with one_blas_thread():
         problem = fine_problem(bench.model, coarse.values, bench.encoder, fine_poses, measure)
     ((cmds, readings),) = seen
-    loop_estimator = sc.get("loop.estimator", str, "ols")
-    estimates = run_estimators(problem, entries, keep_blas=(loop_estimator,))
+    estimates = run_estimators(problem, entries)
     return Calibration(coarse, fine_poses, order, cmds, readings, problem, estimates)
 
 
@@ -226,7 +220,8 @@ def stage_commands(
         comp = TwistCompensation.prepare(bench.model, cal.coarse.values, poses)
     coarse_mech = bench.model.mechanism(cal.coarse.values)
     out = {
-        "uncalibrated": commands_for_poses(nominal, poses),  # before any calibration
+        # before any calibration: commands_for_poses's, solved from the coarse model's
+        "uncalibrated": commands_near(nominal, poses, comp.qpos, comp.actuator_jacobians),
         "coarse": checked_commands(coarse_mech, poses, comp.qpos[:, coarse_mech.actuator_qpos]),
     }
     deltas = {m: est.x for m, (est, _) in cal.estimates.items() if stages is None or m in stages}

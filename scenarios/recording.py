@@ -299,10 +299,50 @@ class Recorder:
         group: str,
         scale: float = 100.0,
     ) -> None:
-        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3)."""
+        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3).
+
+        The bodies' transforms of all poses go out as one column per body (what
+        :meth:`log_pose` logs pose by pose, in one call per body instead of one per body and
+        pose)."""
+        indices = [int(k) for k in indices]
+        qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
+        if self._rec is not None and len(indices) == len(qpos) and len(indices) > 0:
+            self._log_bodies_columns(timeline, indices, mech, qpos)
+            for k, a, b in zip(indices, nominal, measured, strict=True):
+                self.log_targets(timeline, k, a, b, scale=scale, group=group)
+            return
         for k, q, a, b in zip(indices, qpos, nominal, measured, strict=True):
-            self.log_pose(timeline, int(k), mech, q)
-            self.log_targets(timeline, int(k), a, b, scale=scale, group=group)
+            self.log_pose(timeline, k, mech, q)
+            self.log_targets(timeline, k, a, b, scale=scale, group=group)
+
+    @_active
+    def _log_bodies_columns(
+        self, timeline: str, indices: list[int], mech: Mechanism, qpos: np.ndarray
+    ) -> None:
+        rr, m, d = self.rr, mech.model, mech.data
+        xpos = np.empty((len(qpos), m.nbody, 3))
+        xquat = np.empty((len(qpos), m.nbody, 4))
+        for i, q in enumerate(qpos):
+            d.qpos[:] = q
+            mujoco.mj_kinematics(m, d)
+            self.logged.machine_bounds.add(d.xpos[1:])
+            xpos[i], xquat[i] = d.xpos, d.xquat
+        xyzw = xquat[:, :, [1, 2, 3, 0]]
+        times = [rr.TimeColumn(timeline, sequence=indices)]
+        for b in range(1, m.nbody):
+            path = self._body_path(m, b)
+            self._rec.send_columns(
+                path,
+                indexes=times,
+                columns=rr.Transform3D.columns(translation=xpos[:, b], quaternion=xyzw[:, b]),
+            )
+            if path not in self._reference:
+                self._reference[path] = [
+                    rr.Transform3D(
+                        translation=xpos[0, b], quaternion=rr.Quaternion(xyzw=xyzw[0, b])
+                    )
+                ]
+        self.logged.pose_timelines.setdefault(timeline, set()).update(indices)
 
     def log_pose_set(
         self,

@@ -353,3 +353,34 @@ def test_scenario_recordings_show_data_in_every_view(tmp_path, name):  # in its 
         assert "three_reflectors" not in names
         assert rb.times["three_reflectors_pose"]
         assert any(c == "Capsules3D:lengths" for (_e, c) in rb.rows)  # the arm is drawn
+
+
+def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
+    """log_poses sends each body's transforms of all poses as one column: read back, the
+    same transforms at the same time points as pose-by-pose log_pose (and the same targets)."""
+    monkeypatch.setenv("RERUN_STRICT", "1")
+    mech = Mechanism.from_xml(HEXAPOD)
+    home = mech.home_qpos[mech.actuator_qpos]
+    qs = np.array([forward(mech, home + 0.002 * k).qpos for k in range(3)])
+    nominal = np.array([np.zeros((2, 3)) + k for k in range(3)])
+    measured = nominal + 1e-5
+    back = {}
+    for how in ("columns", "one_by_one"):
+        path = tmp_path / f"{how}.rrd"
+        with Recorder(path, "pkm-calib-test") as rec:
+            if how == "columns":
+                rec.log_poses("pose", [4, 5, 6], mech, qs, nominal, measured, "cal")
+            else:
+                for k, q, a, b in zip([4, 5, 6], qs, nominal, measured, strict=True):
+                    rec.log_pose("pose", k, mech, q)
+                    rec.log_targets("pose", k, a, b, group="cal")
+            assert rec.logged.pose_timelines["pose"] == {4, 5, 6}
+        back[how] = Readback(path)
+    a, b = back["columns"], back["one_by_one"]
+    assert a.entities == b.entities and a.times["pose"] == b.times["pose"] == {4, 5, 6}
+    bodies = [e for e in a.entities if e.startswith("/world/bodies/")]
+    assert bodies
+    compared = [k for k in b.rows if k[0] in bodies or k[0].startswith("/world/targets/")]
+    assert len(compared) > len(bodies)  # the transforms and the targets' points and arrows
+    for key in compared:
+        assert a.rows[key] == b.rows[key], key

@@ -95,9 +95,10 @@ class Scaled:
         r = y - b @ self.hs.T
         return np.sum(r * r, axis=-1)
 
-    def ols_rss(self, y: np.ndarray) -> np.ndarray:
-        """Residual sum of squares of the OLS fit (scalar or per run)."""
-        r = y - (y @ self.u) @ self.u.T
+    def ols_rss(self, y: np.ndarray, yu: np.ndarray | None = None) -> np.ndarray:
+        """Residual sum of squares of the OLS fit (scalar or per run); ``yu``: the product
+        ``y @ u`` when the caller has it (the same numbers, one product fewer)."""
+        r = y - ((y @ self.u) if yu is None else yu) @ self.u.T
         return np.sum(r * r, axis=-1)
 
     def filtered(self, y: np.ndarray, f: np.ndarray) -> np.ndarray:

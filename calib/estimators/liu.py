@@ -98,8 +98,9 @@ class Liu:
         self.k = k
         self.sigma2_rule = sigma2_rule
 
-    def _sigma2(self, prob: Scaled, ys: np.ndarray) -> np.ndarray:
-        return prob.ols_rss(ys) / (prob.n if self.sigma2_rule == "paper" else prob.n - prob.m)
+    def _sigma2(self, prob: Scaled, ys: np.ndarray, yu: np.ndarray | None = None) -> np.ndarray:
+        rss = prob.ols_rss(ys, yu)
+        return rss / (prob.n if self.sigma2_rule == "paper" else prob.n - prob.m)
 
     def _d_and_k(self, prob: Scaled, alpha: np.ndarray, s2: np.ndarray):
         """k, raw d and the d used (each (runs,)) for alpha (runs, m)."""
@@ -137,7 +138,8 @@ class Liu:
         """Estimates (runs, m) for ys (runs, n): one factorisation, sigma^2, k, d per run."""
         prob = prepare(h, ys, many=True)
         ys = np.atleast_2d(np.asarray(ys, dtype=float))
-        alpha = prob.alpha(ys)
-        k, _, d = self._d_and_k(prob, alpha, self._sigma2(prob, ys))
+        yu = ys @ prob.u  # once for alpha, sigma^2 and the estimate (the same numbers)
+        alpha = yu / prob.s  # prob.alpha(ys)
+        k, _, d = self._d_and_k(prob, alpha, self._sigma2(prob, ys, yu))
         f = (prob.lambdas[None, :] + d[:, None]) / (prob.lambdas[None, :] + k[:, None])
-        return prob.filtered(ys, f)
+        return ((alpha * f) @ prob.vt) / prob.scale  # prob.filtered(ys, f)

@@ -49,8 +49,9 @@ class LiuPaperUnits:
         hp = h * 1e3 / units  # mm of target per paper unit of parameter
         u, s, vt = np.linalg.svd(hp, full_matrices=False)
         yp = np.atleast_2d(ys) * 1e3  # mm
-        alpha = (yp @ u) / s
-        rss = np.sum((yp - (yp @ u) @ u.T) ** 2, axis=1)
+        yu = yp @ u  # once for alpha and the residual
+        alpha = yu / s
+        rss = np.sum((yp - yu @ u.T) ** 2, axis=1)
         s2 = rss / (n - m)
         lam = s**2
         d = liu_d_optimal(lam, alpha, s2, self.k)
