@@ -30,6 +30,7 @@ from twin.exceptions import ClosureError
 # most this fraction of its standard error (see gauss_newton_polish)
 POLISH_TOL_STD = 1e-8
 POLISH_MAX_STEPS = 10
+POLISH_RISE = 1e-8  # a relative rise of the cost beyond its evaluation noise stops the polish
 
 
 @dataclass(frozen=True)
@@ -148,7 +149,10 @@ def gauss_newton_polish(
     the minimum, wherever its path ended: a start changed by 1e-12 relative (one BLAS thread
     or two) moved the effect's coefficients by up to 3e-7 relative. The steps contract by
     some 18x each, so the end point is the minimum to ~1e-10 standard errors, whatever the
-    start. A step that fails to evaluate (no closure) ends the polish at the last point."""
+    start. A step that fails to evaluate (no closure) or raises the cost by more than its
+    evaluation noise (``POLISH_RISE``, relative; the closure solves' round-off moves the loop's
+    cost by some 5e-12 relative between steps) ends the polish at the last point: the start
+    was too far from the minimum for full steps."""
     for step_no in range(1, max_steps + 1):
         scale = np.linalg.norm(jac, axis=0)
         scale = np.where(scale > 0, scale, 1.0)
@@ -157,7 +161,7 @@ def gauss_newton_polish(
             r_new, state = residual(z + step)
         except ClosureError:
             return z, r, jac, step_no - 1
-        if not np.all(np.isfinite(r_new)):
+        if not np.all(np.isfinite(r_new)) or r_new @ r_new > (r @ r) * (1.0 + POLISH_RISE):
             return z, r, jac, step_no - 1
         small = np.all(np.abs(step) <= tol_std * std_errors(r, jac))
         z = z + step

@@ -34,3 +34,20 @@ def test_polish_reaches_the_same_minimum_from_nearby_starts():
         np.testing.assert_allclose(jac.T @ r, 0.0, atol=1e-12)  # the normal equations hold
         ends.append(z)
     np.testing.assert_allclose(ends[0], ends[1], rtol=1e-12)
+
+
+def test_polish_refuses_a_step_that_raises_the_cost():
+    """Newton on atan overshoots from |z| > 1.39: the polish keeps the start."""
+
+    def residual(z):
+        return np.arctan(z), None
+
+    def jacobian(z, _state):
+        return (1.0 / (1.0 + z**2))[:, None]
+
+    z0 = np.array([2.0])
+    r0, _ = residual(z0)
+    z, r, _, steps = gauss_newton_polish(residual, jacobian, z0, r0, jacobian(z0, None))
+    assert steps == 0
+    np.testing.assert_array_equal(z, z0)
+    np.testing.assert_array_equal(r, r0)
