@@ -201,8 +201,15 @@ def run(
     )
     for label, (est, _) in estimates.items():
         recorder.log_parameters(label, kept_names, est.x * shown, est.std_errors * shown)
-    for k, change in enumerate(cal.coarse.relative_changes):
-        recorder.log_metric("coarse_relative_change", "coarse_round", k + 1, change)
+    # bars, not a curve: a curve on its own timeline left the machine views empty when the
+    # viewer opened on it, and two or three points make no curve
+    changes = cal.coarse.relative_changes
+    recorder.log_bars(
+        "coarse_relative_change",
+        [f"round {k + 1}" for k in range(len(changes))],
+        changes,
+        "relative",
+    )
 
     progress.step("Monte Carlo of the fine estimate (Eqs. 17-18)")
     runs = scenario.get("monte_carlo.runs", int)

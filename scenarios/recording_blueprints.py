@@ -133,7 +133,7 @@ def machine_views(rrb: Any, log: Logged, active: str | None = None) -> list[Any]
         name = "machine"
         if g is not None:
             contents.append(f"world/targets/{g}/**")
-            name = f"machine, targets and error arrows: {label}"
+            name = f"{label}: machine, targets and error arrows"
         views.append(
             rrb.Spatial3DView(origin="world", contents=contents, name=name, eye_controls=eye)
         )
@@ -146,7 +146,7 @@ def error_map_views(rrb: Any, log: Logged) -> Any | None:
         view = rrb.Spatial3DView(
             origin=path,
             contents=["$origin/**"],
-            name=f"error map {em.stage} / {em.layer}, 0-{em.vmax_mm:.3g} mm",
+            name=f"{em.stage} / {em.layer}, 0-{em.vmax_mm:.3g} mm: error map",
             eye_controls=em.bounds.eye(rrb, direction=(0.35, -0.6, 1.0)),
         )
         by_layer.setdefault(em.layer, []).append(view)

@@ -300,8 +300,8 @@ def test_the_blueprint_is_built_from_what_was_logged(tmp_path):
         rec.log_text("verdict", "**fine**")
     views = assert_every_view_has_data(Readback(path), path)
     names = [v["name"] for v in views]
-    assert "machine, targets and error arrows: before" in names
-    assert any(n.startswith("error map before / grid, 0-2 mm") for n in names)
+    assert "before: machine, targets and error arrows" in names
+    assert any(n.startswith("before / grid, 0-2 mm") and n.endswith(": error map") for n in names)
     assert {"parameters: fit", "verdict"} <= set(names)
     assert not any("elsewhere" in n for n in names)
     assert _blueprint(path)[0] == "lm_iteration"  # most curves are plotted against it
@@ -345,11 +345,11 @@ def test_scenario_recordings_show_data_in_every_view(tmp_path, name):  # in its 
     assert "report: key numbers" in names
     if name == "hexapod_paper":  # one error map per stage, the LM cost per iteration
         for stage in ("before", "after_random_few", "after_random_many"):
-            assert f"error map {stage} / verification_grid" in names
+            assert f"{stage} / verification_grid" in names
         assert rb.times["lm_iteration"] and len(rb.times["lm_iteration"]) > 1
     else:  # two variants on their own pose timelines: the view of the one opened on only
         assert _blueprint(path)[0] == "one_reflector_pose"
-        assert "machine, targets and error arrows: one_reflector" in names
+        assert "one_reflector: machine, targets and error arrows" in names
         assert "three_reflectors" not in names
         assert rb.times["three_reflectors_pose"]
         assert any(c == "Capsules3D:lengths" for (_e, c) in rb.rows)  # the arm is drawn
