@@ -32,7 +32,7 @@ from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import rotvec_from_matrix
 from twin.sensitivity import tool_twist_jacobian
-from twin.workspace import _check_labels, _pose_name, check_pose_in_box, stroke_problem
+from twin.workspace import check_labels, check_pose_in_box, checked_commands, pose_name
 
 MAX_STEPS = 12
 STALL = 0.5  # a step that does not halve the largest tool error ends a pose's iteration
@@ -162,12 +162,12 @@ def commands_near(
     approximately). Equal to commands_for_poses's solution to round-off where both start on
     the same assembly branch."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
-    _check_labels(labels, len(poses))
+    check_labels(labels, len(poses))
     for i, p in enumerate(poses):
         try:
             check_pose_in_box(mech, p)
         except WorkspaceError as exc:
-            raise WorkspaceError(f"{_pose_name(i, labels)}: {exc}") from None
+            raise WorkspaceError(f"{pose_name(i, labels)}: {exc}") from None
     try:
         out = inverse_near(mech, poses, start, jacobians, check_stroke=False)[0]
     except (WorkspaceError, ClosureError):  # name the pose: solve them one by one
@@ -176,9 +176,5 @@ def commands_near(
             try:
                 out[i] = inverse(mech, p, start=start[i], check_stroke=False).actuators
             except (WorkspaceError, ClosureError) as exc:
-                raise type(exc)(f"{_pose_name(i, labels)}: {exc}") from None
-    for i, c in enumerate(out):
-        problem = stroke_problem(mech, c)
-        if problem:
-            raise WorkspaceError(f"{_pose_name(i, labels)}: not reachable: {problem}")
-    return out
+                raise type(exc)(f"{pose_name(i, labels)}: {exc}") from None
+    return checked_commands(mech, poses, out, labels)  # each command in its stroke

@@ -26,12 +26,13 @@ def workspace_box(mech: Mechanism) -> tuple[np.ndarray, np.ndarray]:
     return mech.workspace_min, mech.workspace_max
 
 
-def _pose_name(i: int, labels: Sequence[object] | None) -> str:
+def pose_name(i: int, labels: Sequence[object] | None) -> str:
     """How messages name pose ``i``: its dataset ``pose_id`` when labels are given."""
     return f"pose {i}" if labels is None else f"pose_id {labels[i]}"
 
 
-def _check_labels(labels: Sequence[object] | None, n: int) -> None:
+def check_labels(labels: Sequence[object] | None, n: int) -> None:
+    """One label per pose, or none."""
     if labels is not None and len(labels) != n:
         raise ValueError(f"{len(labels)} pose labels for {n} poses")
 
@@ -88,11 +89,11 @@ def check_command_strokes(
             f"expected {mech.n_actuators} actuator commands {mech.actuator_names} per pose, "
             f"got shape {c.shape}"
         )
-    _check_labels(labels, len(c))
+    check_labels(labels, len(c))
     for i, row in enumerate(c):
         problem = stroke_problem(mech, row)
         if problem:
-            raise WorkspaceError(f"{_pose_name(i, labels)}: {problem}")
+            raise WorkspaceError(f"{pose_name(i, labels)}: {problem}")
 
 
 def commands_for_poses(
@@ -103,7 +104,7 @@ def commands_for_poses(
     ``labels`` (one per pose, e.g. a dataset's ``pose_id`` values) name the poses in errors;
     without them a pose is named by its row index. Values are shown in mm and deg."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
-    _check_labels(labels, len(poses))
+    check_labels(labels, len(poses))
     out = np.empty((len(poses), mech.n_actuators))
     q = None
     for i, p in enumerate(poses):
@@ -114,7 +115,7 @@ def commands_for_poses(
             if problem:
                 raise WorkspaceError(f"not reachable: {problem}")
         except (WorkspaceError, ClosureError) as exc:
-            raise type(exc)(f"{_pose_name(i, labels)}: {exc}") from None
+            raise type(exc)(f"{pose_name(i, labels)}: {exc}") from None
         out[i] = sol.actuators
         q = sol.qpos
     return out
@@ -128,7 +129,7 @@ def checked_commands(
     errors name the pose. Returns the commands (N, A)."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
-    _check_labels(labels, len(poses))
+    check_labels(labels, len(poses))
     if commands.shape != (len(poses), mech.n_actuators):
         raise WorkspaceError(
             f"expected {len(poses)} x {mech.n_actuators} commands, got shape {commands.shape}"
@@ -140,7 +141,7 @@ def checked_commands(
             if problem:
                 raise WorkspaceError(f"not reachable: {problem}")
         except WorkspaceError as exc:
-            raise WorkspaceError(f"{_pose_name(i, labels)}: {exc}") from None
+            raise WorkspaceError(f"{pose_name(i, labels)}: {exc}") from None
     return commands
 
 
