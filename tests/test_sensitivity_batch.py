@@ -62,3 +62,45 @@ def test_least_squares_closure_batch_equals_per_pose():
     batch = target_jacobian_batch(mech, params, values, qpos)
     np.testing.assert_allclose(batch, per_pose, rtol=0, atol=1e-12)
     assert np.abs(per_pose).max() > 0.1
+
+
+@pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher"])
+@pytest.mark.parametrize("refused", ["every", "alternate"])
+def test_adjoint_with_static_pivots_refused_equals_per_pose(name, refused, monkeypatch):
+    """Poses whose static pivots fail the threshold test (an ill-conditioned closure system,
+    or one far from the home configuration the pivots were chosen at) go through Householder
+    in the adjoint solve, for the closures' eliminations and for the transposed reduced
+    system: the Jacobian stays the per-pose one. No pose within the machines' strokes is
+    ill-conditioned enough to refuse a pivot, so the refusal is forced: for every system, or
+    for every other one (static and Householder systems side by side in one batch)."""
+    from twin import kinematics_reduced, small_systems
+
+    nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
+    params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
+    rng = np.random.default_rng(1)
+    values = rng.uniform(-1e-3, 1e-3, len(params))
+    mech = nominal.with_model(params.inject(nominal.model, values))
+    _, commands = random_poses(nominal, 12, rng)
+    qpos = forward_batch(mech, commands).qpos
+    per_pose = np.vstack([target_jacobian(mech, params, values, q) for q in qpos])
+    static = small_systems.eliminate_static
+    calls = []
+
+    def refuse(mat, k, threshold=small_systems.THRESHOLD):
+        ok = static(mat, k, threshold)
+        calls.append(mat.shape)
+        return ok & (np.arange(ok.size) % 2 == 1) if refused == "alternate" else ok & False
+
+    monkeypatch.setattr(kinematics_reduced, "eliminate_static", refuse)
+    monkeypatch.setattr(small_systems, "eliminate_static", refuse)
+    batch = target_jacobian_batch(mech, params, values, qpos, JacobianPlan.for_mechanism(nominal))
+    s = len(_closure(nominal).shared)
+    assert (s, s + 3 * nominal.n_targets, len(qpos)) in calls  # the reduced system too
+    np.testing.assert_allclose(batch, per_pose, rtol=0, atol=1e-12)
+    assert np.abs(per_pose).max() > 0.1
+
+
+def _closure(mech: Mechanism):
+    from twin.kinematics_fast import fast_kinematics
+
+    return fast_kinematics(mech).closure

@@ -9,9 +9,13 @@ closure's row transform ``T`` (``T A = [U; 0]`` for its private columns ``A``), 
     z_c = T_c^T [U_c^-T b_c ; w_c],   sum_c B_red,c^T w_c = b_s - sum_c B_top,c^T U_c^-T b_c
 
 for the private right-hand sides ``b_c`` and the shared ones ``b_s``: triangular solves, one
-small reduced system per configuration and products, no 36 x 36 factorisation. Square
-systems only (the identification of an exactly constrained machine); the caller falls back
-otherwise. Layout as in twin.kinematics_reduced (configurations last).
+small reduced system per configuration and products, no 36 x 36 factorisation. The reduced
+systems (transposed) are solved like the forward ones, vectorised over configurations
+(twin.small_systems.solve_square: static pivots chosen for the transpose at the home
+configuration, Householder where one is refused), not by a LAPACK call per configuration.
+Square systems only (the identification of an exactly constrained machine); the caller
+falls back otherwise (least squares by the forward elimination). Layout as in
+twin.kinematics_reduced (configurations last).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 
 from twin.kinematics_reduced import ClosureStructure
 from twin.kinematics_tree import TreeFrames
+from twin.small_systems import solve_square
 
 
 def adjoint_solve(
@@ -36,7 +41,7 @@ def adjoint_solve(
         size = (cs.row_offset[c + 1] if c + 1 < len(cs.row_offset) else cs.n_closure) - off
         ident[off + np.arange(size), np.arange(size)] = 1.0
     mats = cs.matrices(frames, site_pos, ident)
-    cs.eliminate_groups(mats)
+    cs.eliminate_groups(mats, rebuild=lambda: cs.matrices(frames, site_pos, ident))
     s = len(cs.shared)
     rhs_s = b[cs.shared].copy() if s else None
     tops, reduced = [], []
@@ -51,8 +56,10 @@ def adjoint_solve(
     w_red_all = None
     if s:
         red = np.concatenate(reduced)  # (s, s, N): rows (group, slot, row), columns shared
-        w_red_all = np.linalg.solve(red.transpose(2, 1, 0), rhs_s.transpose(2, 0, 1))
-        w_red_all = w_red_all.transpose(1, 2, 0)  # (s, m, N)
+        # red^T w = rhs_s as the system [red^T | rhs_s], its rows in the static pivot order
+        # chosen for the transpose (ClosureStructure.order_rows)
+        aug = np.concatenate([red.transpose(1, 0, 2), rhs_s], axis=1)[cs.reduced_order_t]
+        w_red_all = solve_square(aug)  # (s, m, N)
     z = np.zeros((cs.n_closure, m_rhs, n))
     start = 0
     for g, mat, w_top in zip(cs.groups, mats, tops, strict=True):

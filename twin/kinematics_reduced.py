@@ -161,6 +161,7 @@ class ClosureStructure:
         # elimination (ClosureStructure.order_rows); the identity until chosen
         self.rank = [np.tile(np.arange(g.rows), (len(g.closures), 1)) for g in self.groups]
         self.reduced_order = np.arange(len(self.shared))  # the reduced system's, likewise
+        self.reduced_order_t = np.arange(len(self.shared))  # its transpose's (adjoint solves)
         self._plans: dict[int, tuple[list, list[np.ndarray]]] = {}  # see _scatter_plan
         self.square = fits and nf == self.n_closure
         shared_pos = -np.ones(nf, dtype=int)
@@ -337,7 +338,8 @@ class ClosureStructure:
     def order_rows(self, frames: TreeFrames, site_pos: np.ndarray) -> None:
         """Choose the static pivots at one configuration (``frames`` of N = 1, e.g. home):
         each closure's rows by partial pivoting on its private columns, then the rows of the
-        square reduced system by partial pivoting on it."""
+        square reduced system by partial pivoting on it (and on its transpose, for the
+        adjoint solves of twin.kinematics_adjoint)."""
         rhs = np.zeros((self.n_closure, 1, 1))
         mats = self.matrices(frames, site_pos, rhs)
         for g, (grp, mat) in enumerate(zip(self.groups, mats, strict=True)):
@@ -352,6 +354,7 @@ class ClosureStructure:
             red = self._reduced(mats)
             if red.shape[0] == s:
                 self.reduced_order = pivot_order(red[:, :s, 0], s)
+                self.reduced_order_t = pivot_order(red[:, :s, 0].T, s)
 
     def eliminate_groups(
         self, mats: list[np.ndarray], rebuild: Callable[[], list[np.ndarray]] | None = None
