@@ -72,8 +72,8 @@ def adjoint_solve(
             w = w_top
         t = mat[:, k + s : k + s + r]  # (r, r, G, N): transformed rows x original rows
         zc = np.einsum("qrgn,qmgn->rmgn", t[: w.shape[0]], w)
-        for slot, c in enumerate(g.closures):
-            z[cs.row_offset[c] + np.arange(r)] = zc[:, :, slot]
+        rows = cs.row_offset[g.closures][None, :] + np.arange(r)[:, None]  # (r, G)
+        z[rows] = np.moveaxis(zc, 2, 1)
     return z
 
 
