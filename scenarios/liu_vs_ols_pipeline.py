@@ -152,13 +152,13 @@ def run_estimators(problem: FineProblem, entries: list) -> dict[str, tuple[Linea
     BLAS setting)."""
     out = {}
     for entry in entries:
-        label = estimator_label(entry)
+        if isinstance(entry, str):
+            method, opts = entry, {}
+        else:
+            method = entry["method"]
+            opts = {k: v for k, v in entry.items() if k not in ("label", "method")}
         with one_blas_thread():
-            if isinstance(entry, str):
-                out[entry] = estimate(problem, entry)
-            else:
-                opts = {k: v for k, v in entry.items() if k not in ("label", "method")}
-                out[label] = estimate(problem, entry["method"], **opts)
+            out[estimator_label(entry)] = estimate(problem, method, **opts)
     return out
 
 
