@@ -1,10 +1,11 @@
 """The identification Jacobian of many poses at once (twin.sensitivity, vectorised).
 
-Same mathematics as :func:`twin.sensitivity.target_jacobian` (screws of the parameters, the
+Same mathematics as :func:`twin.sensitivity.target_jacobian` and
+:func:`twin.sensitivity.tool_twist_jacobian` (screws of the parameters, the
 implicit-function theorem over the closures), computed for all poses together: the frames
 from the numpy kinematic tree (twin.kinematics_tree), the screws as arrays over poses and
 parameters, and the implicit term ``-J_t (dc/dq)^-1 dc/dpi`` through one adjoint solve per
-target coordinate (twin.kinematics_adjoint), contracted only over the (site, parameter)
+output coordinate (twin.kinematics_adjoint), contracted only over the (site, parameter)
 pairs that move. The tests hold it equal to the per-pose function to round-off.
 """
 
@@ -36,22 +37,46 @@ class JacobianPlan:
     structure: KinematicStructure
     free: np.ndarray
     target_moves: np.ndarray  # (T, n_free): the free dof moves the target
+    tool_moves: np.ndarray  # (1, n_free): the free dof moves the tool site
 
     @classmethod
     def for_mechanism(cls, mech: Mechanism) -> JacobianPlan:
-        st = kinematic_structure(mech)
         free = mech.free_dofs()
-        moves = np.zeros((mech.n_targets, len(free)), dtype=bool)
-        parent = mech.model.body_parentid
-        for i, s in enumerate(mech.target_sites):
-            b, chain = int(mech.model.site_bodyid[s]), set()
-            while True:
-                chain.add(b)
-                if b == 0:
-                    break
-                b = int(parent[b])
-            moves[i] = np.isin(mech.model.dof_bodyid[free], list(chain))
-        return cls(structure=st, free=free, target_moves=moves)
+        return cls(
+            structure=kinematic_structure(mech),
+            free=free,
+            target_moves=_dofs_moving(mech.model, mech.target_sites, free),
+            tool_moves=_dofs_moving(mech.model, [mech.tool_site], free),
+        )
+
+
+def _dofs_moving(model, sites, dofs: np.ndarray) -> np.ndarray:
+    """(S, len(dofs)) bool: the dof moves the site (its body is an ancestor-or-self)."""
+    parent = model.body_parentid
+    moves = np.zeros((len(sites), len(dofs)), dtype=bool)
+    for i, s in enumerate(sites):
+        b, chain = int(model.site_bodyid[s]), set()
+        while True:
+            chain.add(b)
+            if b == 0:
+                break
+            b = int(parent[b])
+        moves[i] = np.isin(model.dof_bodyid[dofs], list(chain))
+    return moves
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """The sites whose motion is differentiated: their positions (3 rows each, x, y, z)
+    and, with ``angular``, their rotations as well (3 more rows each, angular velocity)."""
+
+    sites: np.ndarray  # (O,) site ids
+    moves: np.ndarray  # (O, n_free): the free dof moves the site
+    angular: bool
+
+    @property
+    def rows(self) -> int:
+        return 6 if self.angular else 3
 
 
 def frames_at(model, qpos: np.ndarray) -> dict[str, np.ndarray]:
@@ -83,42 +108,49 @@ def _aos(model, frames: TreeFrames, sites: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _chunk(
-    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, plan
+    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, out: Outputs
 ) -> np.ndarray:
-    """(N, T*3, n) for the configurations ``qpos`` (N, nq).
+    """(N, O*rows, n) for the configurations ``qpos`` (N, nq): rows site-major, x, y, z of
+    the position, then (``out.angular``) of the rotation.
 
     A parameter's screw moves a site it affects by ``t + w x (p - o)`` (translation ``t``,
-    rotation ``w`` about the pivot ``o``), i.e. ``v + w x p`` with ``v = t - w x o``; the
-    closures' rows are the differences of their two sites' motions (and of ``w`` for a weld's
-    rotation). The implicit term ``-z^T c_pi`` (``z`` from the adjoint solve, one column per
-    target coordinate) is contracted without forming ``c_pi`` (:func:`_implicit_term`)."""
+    rotation ``w`` about the pivot ``o``), i.e. ``v + w x p`` with ``v = t - w x o``, and
+    turns it by ``w``; the closures' rows are the differences of their two sites' motions
+    (and of ``w`` for a weld's rotation). The implicit term ``-z^T c_pi`` (``z`` from the
+    adjoint solve, one column per output row) is contracted without forming ``c_pi``
+    (:func:`_implicit_term`)."""
     m = mech.model
     fk = fast_kinematics(mech)
     frames = tree_frames(fk.tree, m, np.ascontiguousarray(qpos.T), fk.numbers())
     cs = fk.closure
-    targets = np.asarray(mech.target_sites, dtype=int)
     closure_sites = cs.sites if cs is not None else np.zeros(0, dtype=int)
-    sites = np.concatenate([closure_sites, targets]).astype(int)
+    sites = np.concatenate([closure_sites, out.sites]).astype(int)
     t, wn, o = params.screws_soa(m, frames.xpos, frames.xmat, frames.xanchor, frames.xaxis, values)
     vn = t - cross_soa(wn, o)  # (3, n, N)
     site_pos = frames.site_positions(m, sites)  # (3, S, N)
     affected = params.site_affected(m, sites).astype(float)  # (S, n)
-    n_pose, n_par, nc, n_t = len(qpos), len(params), len(closure_sites) // 2, len(targets)
-    pt = site_pos[:, 2 * nc :]  # (3, T, N)
-    ts, ks = np.nonzero(affected[2 * nc :])  # (target, parameter) pairs that move
-    y = np.zeros((n_t, 3, n_par, n_pose))
+    n_pose, n_par, nc, n_o = len(qpos), len(params), len(closure_sites) // 2, len(out.sites)
+    d = out.rows
+    pt = site_pos[:, 2 * nc :]  # (3, O, N)
+    ts, ks = np.nonzero(affected[2 * nc :])  # (output site, parameter) pairs that move
+    y = np.zeros((n_o, d, n_par, n_pose))
     if ts.size:
-        y[ts, :, ks] = (vn[:, ks] + cross_soa(wn[:, ks], pt[:, ts])).transpose(1, 0, 2)
-    y = y.transpose(3, 0, 1, 2).reshape(n_pose, n_t * 3, n_par)
+        y[ts, :3, ks] = (vn[:, ks] + cross_soa(wn[:, ks], pt[:, ts])).transpose(1, 0, 2)
+        if out.angular:
+            y[ts, 3:, ks] = wn[:, ks].transpose(1, 0, 2)
+    y = y.transpose(3, 0, 1, 2).reshape(n_pose, n_o * d, n_par)
     if cs is None:  # a serial chain: the explicit term is all
         return y
     axes, anchors = cs.dof_axes(frames)  # (3, n_free, N)
-    lin = np.broadcast_to(axes[:, None], (3, n_t, *axes.shape[1:])).copy()
+    n_free = axes.shape[1]
     rot = cs.dof_rot
-    lever = pt[:, :, None] - anchors[:, None, rot]
-    lin[:, :, rot] = cross_soa(axes[:, None, rot], lever)
-    lin *= plan.target_moves[None, :, :, None]
-    jt = lin.transpose(2, 1, 0, 3).reshape(len(plan.free), n_t * 3, n_pose)  # (n_free, m, N)
+    motion = np.zeros((d, n_o, n_free, n_pose))  # output rows moved by each free dof
+    motion[:3] = axes[:, None]
+    motion[:3, :, rot] = cross_soa(axes[:, None, rot], pt[:, :, None] - anchors[:, None, rot])
+    if out.angular:  # a rotational dof turns the site about its axis, a translation not
+        motion[3:, :, rot] = axes[:, None, rot]
+    motion *= out.moves[None, :, :, None]
+    jt = motion.transpose(2, 1, 0, 3).reshape(n_free, n_o * d, n_pose)  # (n_free, m, N)
     if not cs.square:
         aff_a, aff_b = affected[:nc], affected[nc : 2 * nc]
         pa, pb = site_pos[:, :nc], site_pos[:, nc : 2 * nc]  # (3, C, N)
@@ -134,9 +166,9 @@ def _chunk(
                 c_pi[r0 + 3 : r0 + 6] = dw[:, i]
         dq = cs.solve(cs.matrices(frames, site_pos[:, : 2 * nc], -c_pi))  # (n_free, n, N)
         return np.einsum("fmn,fkn->nmk", jt, dq) + y
-    # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with T*3 right-hand
-    # sides per pose instead of one with a column per parameter
-    z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, T*3, N)
+    # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with a right-hand
+    # side per output row and pose instead of one with a column per parameter
+    z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, m, N)
     return y - _implicit_term(cs, z, vn, wn, site_pos[:, : 2 * nc], affected[: 2 * nc])
 
 
@@ -148,10 +180,10 @@ def _implicit_term(
     site_pos: np.ndarray,
     affected: np.ndarray,
 ) -> np.ndarray:
-    """``z^T c_pi`` (N, T*3, n) without forming ``c_pi``: only the (closure site, parameter)
+    """``z^T c_pi`` (N, m, n) without forming ``c_pi``: only the (closure site, parameter)
     pairs that move contribute, ``+-z_c . (v + w x p)`` (the site's velocity under the
     parameter's screw; + for a closure's first site, - for its second) and ``+-z_rot . w``
-    for a weld's rotation rows. ``z`` (n_closure, T*3, N), ``v``/``w`` (3, n, N),
+    for a weld's rotation rows. ``z`` (n_closure, m, N), ``v``/``w`` (3, n, N),
     ``site_pos`` (3, 2C, N), ``affected`` (2C, n)."""
     nc = site_pos.shape[1] // 2
     n_par, n_rhs, n_pose = v.shape[1], z.shape[1], z.shape[2]
@@ -185,10 +217,36 @@ def target_jacobian_batch(
     pose-major then target then x, y, z (as ``targets.reshape(-1)``). ``mech`` carries the
     model with ``values`` injected; ``plan`` (from the nominal machine) may be reused."""
     plan = plan or JacobianPlan.for_mechanism(mech)
+    out = Outputs(np.asarray(mech.target_sites, dtype=int), plan.target_moves, angular=False)
+    return _batched(mech, params, values, qpos, out).reshape(-1, len(params))
+
+
+def tool_twist_jacobian_batch(
+    mech: Mechanism,
+    params: ParameterSet,
+    values: np.ndarray,
+    qpos: np.ndarray,
+    plan: JacobianPlan | None = None,
+) -> np.ndarray:
+    """d(tool pose error twist)/d(parameters) at closed configurations ``qpos`` (N, nq):
+    (N, 6, n), the linear velocity of the tool point then the angular velocity, world axes
+    (:func:`twin.sensitivity.tool_twist_jacobian` of every pose). ``mech`` carries the model
+    with ``values`` injected; ``plan`` (from the nominal machine) may be reused."""
+    plan = plan or JacobianPlan.for_mechanism(mech)
+    out = Outputs(np.array([mech.tool_site], dtype=int), plan.tool_moves, angular=True)
+    return _batched(mech, params, values, qpos, out)
+
+
+def _batched(
+    mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, out: Outputs
+) -> np.ndarray:
+    """:func:`_chunk` over ``qpos`` (N, nq) in chunks of CHUNK poses: (N, O*rows, n)."""
     qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
+    if not len(qpos):
+        return np.zeros((0, len(out.sites) * out.rows, len(params)))
     with one_blas_thread():
         parts = [
-            _chunk(mech, params, values, qpos[i : i + CHUNK], plan)
+            _chunk(mech, params, values, qpos[i : i + CHUNK], out)
             for i in range(0, len(qpos), CHUNK)
         ]
-    return np.concatenate(parts).reshape(-1, len(params))
+    return np.concatenate(parts)
