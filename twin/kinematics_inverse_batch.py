@@ -31,7 +31,7 @@ from twin.kinematics_fast import one_blas_thread
 from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import rotvec_from_matrix
-from twin.sensitivity import tool_twist_jacobian
+from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.workspace import check_labels, check_pose_in_box, checked_commands, pose_name
 
 MAX_STEPS = 12
@@ -52,8 +52,7 @@ def actuator_joint_parameters(mech: Mechanism) -> ParameterSet:
 def actuator_twist_jacobians(mech: Mechanism, qpos: np.ndarray) -> np.ndarray:
     """d(tool twist)/d(actuator joint values) (N, 6, A) at closed configurations (N, nq)."""
     params = actuator_joint_parameters(mech)
-    zero = np.zeros(len(params))
-    return np.array([tool_twist_jacobian(mech, params, zero, q) for q in np.atleast_2d(qpos)])
+    return tool_twist_jacobian_batch(mech, params, np.zeros(len(params)), qpos)
 
 
 def tool_errors(
