@@ -17,7 +17,7 @@ from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import inverse
 from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
-from twin.sensitivity import tool_twist_jacobian
+from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.workspace import commands_for_poses
 
 
@@ -70,13 +70,10 @@ class TwistCompensation:
         poses = np.atleast_2d(np.asarray(poses, dtype=float))
         mech = model.mechanism(base_values)
         qpos = np.empty((len(poses), mech.model.nq))
-        jac = np.empty((len(poses), 6, model.n_parameters))
         q = None
-        for i, pose in enumerate(poses):
-            sol = inverse(mech, pose, start=q)
-            qpos[i] = sol.qpos
-            jac[i] = tool_twist_jacobian(mech, model.params, base_values, sol.qpos)
-            q = sol.qpos
+        for i, pose in enumerate(poses):  # each pose started from the previous solution
+            q = qpos[i] = inverse(mech, pose, start=q).qpos
+        jac = tool_twist_jacobian_batch(mech, model.params, base_values, qpos)
         return cls(model, base_values, poses, qpos, jac, actuator_twist_jacobians(mech, qpos))
 
     def commands(self, delta: np.ndarray, columns: np.ndarray) -> np.ndarray:
