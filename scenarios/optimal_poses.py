@@ -37,7 +37,7 @@ from scenarios.sweep_draws import map_draws
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
-from twin.sensitivity import tool_twist_jacobian
+from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.tracker import PoseNoise
 from twin.workspace import boundary_poses, grid_poses, random_poses
 
@@ -154,9 +154,8 @@ def run(
     progress.step("verification grid and its pose-error Jacobians")
     _, v_cmds = grid_poses(nominal, 3, 8, rng, margin=0.25, stroke_margin=2e-3)
     v_qpos = forward_batch(truth, v_cmds).qpos
-    b_ver = np.array(
-        [tool_twist_jacobian(truth, params, truth_values, q) for q in v_qpos]
-    )  # (V, 6, n): truth side of the scoring only
+    # (V, 6, n): truth side of the scoring only
+    b_ver = tool_twist_jacobian_batch(truth, params, truth_values, v_qpos)
 
     draws = scenario.get("evaluation.noise_draws", int)
     local = nominal.target_local()
