@@ -8,7 +8,7 @@ the closed chain: with the actuators held, the closure c(q, pi) = 0 defines q(pi
 
 for the target positions y. A serial chain has no closure and no free dof: the implicit part
 vanishes and dy/dpi is the explicit term alone. Tests compare it with finite differences of
-the full solve.
+the full solve. twin.sensitivity_batch computes the same for many poses at once.
 """
 
 from __future__ import annotations
@@ -66,7 +66,8 @@ def tool_twist_jacobian(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray
 ) -> np.ndarray:
     """d(tool pose error twist)/d(parameters), (6, n): linear velocity of the tool point and
-    angular velocity, world axes (the first paper's B of Eq. 7, from the twin)."""
+    angular velocity, world axes (the first paper's B of Eq. 7, from the twin). For many
+    poses, twin.sensitivity_batch.tool_twist_jacobian_batch (the tests' reference is this)."""
     sites = np.array([mech.tool_site])
     dq, free, dp, dw = _implicit(mech, params, values, qpos, sites)
     jp, jr = site_jacobians(mech, sites)
