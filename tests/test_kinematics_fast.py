@@ -3,10 +3,10 @@
 * the kinematic tree equals MuJoCo's ``mj_kinematics`` (frames of bodies, joints, sites) on
   the three machines and on a model with every joint kind, general and negative axes and
   joint offsets;
-* batched forward kinematics equals the single-pose MuJoCo Newton solve to 1e-9 m (it is
-  ~1e-13) on the hexapod, the polisher, the serial arm and a four-bar linkage whose closure
-  has more equations than unknowns (the least-squares path), and follows a model edited in
-  place;
+* batched forward kinematics, compiled and numpy alike, equals the single-pose MuJoCo Newton
+  solve to 1e-9 m (it is ~1e-13) on the hexapod, the polisher, the serial arm and a four-bar
+  linkage whose closure has more equations than unknowns (the least-squares path), and
+  follows a model edited in place;
 * the per-closure elimination and the adjoint solve equal dense LAPACK solves, also where
   the static pivots are refused and Householder takes over.
 """
@@ -170,10 +170,11 @@ def _assert_batch_equals_single(mech: Mechanism, commands: np.ndarray, **kwargs)
     assert np.all(batch.residual < 1e-12)
 
 
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
 @pytest.mark.parametrize("name", MACHINES)
-def test_batch_equals_single_pose_solve(machines, name):
+def test_batch_equals_single_pose_solve(machines, name, compiled):
     mech, commands = machines[name]
-    _assert_batch_equals_single(mech, commands)
+    _assert_batch_equals_single(mech, commands, compiled=compiled)
 
 
 @pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher"])
@@ -187,14 +188,15 @@ def test_elimination_is_used_on_the_parallel_machines(machines, name):
     assert len(cs.shared) == expected[2]
 
 
-def test_cold_start_predictor_changes_nothing(machines, monkeypatch):
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_cold_start_predictor_changes_nothing(machines, monkeypatch, compiled):
     mech, commands = machines["hexapod_rrrprr"]
-    predicted = forward_batch(mech, commands)
+    predicted = forward_batch(mech, commands, compiled=compiled)
     monkeypatch.setattr(kinematics_fast, "PREDICT_MIN", 10**9)
     import twin.kinematics_batch as kb
 
     monkeypatch.setattr(kb, "PREDICT_MIN", 10**9)
-    plain = forward_batch(mech, commands)
+    plain = forward_batch(mech, commands, compiled=compiled)
     np.testing.assert_allclose(predicted.targets, plain.targets, rtol=0, atol=1e-12)
     assert predicted.iterations <= plain.iterations
 
@@ -212,20 +214,22 @@ def test_a_model_edited_in_place_is_followed(machines):
 
 @pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher"])
 def test_batch_with_every_static_pivot_refused(machines, name, monkeypatch):
-    """Householder for every closure system (the rebuilt matrices): the same solutions."""
+    """Householder for every closure system (the rebuilt matrices) of the numpy path: the same
+    solutions."""
     mech, commands = machines[name]
     refuse = lambda mat, k, threshold=0.1: np.zeros(mat.shape[-1], dtype=bool)  # noqa: E731
     monkeypatch.setattr(kinematics_reduced, "eliminate_static", refuse)
-    _assert_batch_equals_single(mech, commands[:20])
+    _assert_batch_equals_single(mech, commands[:20], compiled=False)
 
 
-def test_four_bar_least_squares_closure():
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_four_bar_least_squares_closure(compiled):
     mech = Mechanism.from_xml_string(FOUR_BAR)
     cs = fast_kinematics(mech).closure
     assert cs.eliminates and not cs.square  # 3 equations, 2 passive joints, none shared
     assert len(cs.shared) == 0
     commands = np.linspace(-0.4, 0.4, 24)[:, None]
-    _assert_batch_equals_single(mech, commands)
+    _assert_batch_equals_single(mech, commands, compiled=compiled)
 
 
 def _system(name: str, machines, n: int):

@@ -24,6 +24,14 @@ import numpy as np
 
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import ACCEPT, MAX_ITER, MAX_STEP, TOLERANCE, check_commands
+from twin.kinematics_compiled import (
+    CompiledPlan,
+    compiled_numbers,
+    compiled_plan,
+    processors,
+    run_chunks,
+    solve_compiled,
+)
 from twin.kinematics_fast import (
     PREDICT_MIN,
     FastKinematics,
@@ -81,12 +89,15 @@ def forward_batch(
     nthread: int = 0,
     start: np.ndarray | None = None,
     check_stroke: bool = True,
+    compiled: bool = True,
 ) -> BatchSolution:
     """Forward kinematics for commands (N, A) (SI); raises ClosureError naming failed poses.
 
     ``start``: one configuration (nq,) or one per pose (N, nq), e.g. the previous solution
     when the same poses are solved again for slightly different parameters. ``nthread``: 0
     for one thread per processor (used only for many poses), else at most that many.
+    ``compiled``: the compiled kernels (twin.kinematics_compiled) where they cover the machine,
+    else (or when False) the numpy path; both give the same solutions to round-off.
     """
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
     if commands.shape[1:] != (mech.n_actuators,):
@@ -112,6 +123,9 @@ def forward_batch(
     qpos = np.array(np.broadcast_to(q0, (n, m.nq)))
     qpos[:, mech.actuator_qpos] = commands
     fk = fast_kinematics(mech)
+    plan = compiled_plan(fk) if compiled else None
+    if plan is not None:
+        return _forward_compiled(fk, plan, qpos, commands, start is None, nthread)
     q = np.ascontiguousarray(qpos.T)  # (nq, N)
     if start is None and n >= PREDICT_MIN and fk.closure is not None:
         predict_start(fk, q, commands)
@@ -138,12 +152,7 @@ def forward_batch(
         else:
             with ThreadPoolExecutor(workers) as pool:
                 iterations = max(pool.map(work, range(workers)))
-    failed = np.flatnonzero(~(residual < ACCEPT))
-    if failed.size:
-        raise ClosureError(
-            f"batched forward kinematics of '{mech.name}': {failed.size} of {n} poses did not "
-            f"close (first: pose {failed[0]}, residual {residual[failed[0]]:.3g})"
-        )
+    _raise_unclosed(mech, residual)
     return BatchSolution(
         qpos=np.ascontiguousarray(q.T),
         tool_rotation=np.moveaxis(sites[:, 1:, 0], -1, 0).copy(),
@@ -152,6 +161,59 @@ def forward_batch(
         residual=residual,
         iterations=iterations,
     )
+
+
+COMPILED_PARALLEL_MIN = 256  # fewer poses than this run on one thread (compiled kernels)
+
+
+def _forward_compiled(
+    fk: FastKinematics,
+    plan: CompiledPlan,
+    qpos: np.ndarray,
+    commands: np.ndarray,
+    cold: bool,
+    nthread: int,
+) -> BatchSolution:
+    """forward_batch on the compiled kernels: ``qpos`` (N, nq) the starts with the actuators
+    at their commands (moved by the linear predictor when ``cold``)."""
+    n = len(qpos)
+    if cold and n >= PREDICT_MIN and fk.closure is not None:
+        qt = np.ascontiguousarray(qpos.T)
+        predict_start(fk, qt, commands)
+        qpos = qt.T
+    q = np.ascontiguousarray(qpos)
+    numbers = compiled_numbers(fk)
+    out_pos = np.empty((n, len(plan.out_sites), 3))
+    out_rot = np.empty((n, 3, 3))
+    residual = np.empty(n)
+    iterations = np.zeros(n, dtype=np.int64)
+    workers = 1 if n < COMPILED_PARALLEL_MIN else (nthread or processors())
+    size = -(-n // workers)
+    chunks = [slice(i, min(n, i + size)) for i in range(0, n, size)]
+
+    def work(sl: slice) -> None:
+        solve_compiled(plan, numbers, q[sl], out_pos[sl], out_rot[sl], residual[sl],
+                       iterations[sl], (TOLERANCE, ACCEPT, MAX_ITER, MAX_STEP))  # fmt: skip
+
+    run_chunks(work, chunks)
+    _raise_unclosed(fk.mech, residual)
+    return BatchSolution(
+        qpos=q,
+        tool_rotation=out_rot,
+        tool_position=out_pos[:, 0].copy(),
+        targets=out_pos[:, 1:].copy(),
+        residual=residual,
+        iterations=int(iterations.max(initial=0)),
+    )
+
+
+def _raise_unclosed(mech: Mechanism, residual: np.ndarray) -> None:
+    failed = np.flatnonzero(~(residual < ACCEPT))
+    if failed.size:
+        raise ClosureError(
+            f"batched forward kinematics of '{mech.name}': {failed.size} of {len(residual)} "
+            f"poses did not close (first: pose {failed[0]}, residual {residual[failed[0]]:.3g})"
+        )
 
 
 def _chunk_limit(fk: FastKinematics) -> int:

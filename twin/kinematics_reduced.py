@@ -83,6 +83,7 @@ class ClosureStructure:
         self.weld = np.array([c.kind == "weld" for c in mech.closures], dtype=bool)
         self._read_dofs(m)
         moves = self._moves(m, self.sites)  # (2 C, n_free)
+        self.site_moves = moves
         entries = []  # (closure, dof, ma, mb, rot)
         touch = np.zeros((nc, len(self.free)), dtype=bool)
         for c in range(nc):
