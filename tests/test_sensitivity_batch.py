@@ -73,7 +73,7 @@ def test_adjoint_with_static_pivots_refused_equals_per_pose(name, refused, monke
     system: the Jacobian stays the per-pose one. No pose within the machines' strokes is
     ill-conditioned enough to refuse a pivot, so the refusal is forced: for every system, or
     for every other one (static and Householder systems side by side in one batch)."""
-    from twin import kinematics_reduced, small_systems
+    from twin import kinematics_reduced, sensitivity_batch, small_systems
 
     nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
     params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
@@ -93,6 +93,7 @@ def test_adjoint_with_static_pivots_refused_equals_per_pose(name, refused, monke
 
     monkeypatch.setattr(kinematics_reduced, "eliminate_static", refuse)
     monkeypatch.setattr(small_systems, "eliminate_static", refuse)
+    monkeypatch.setattr(sensitivity_batch, "COMPILED", False)  # the numpy adjoint solve
     batch = target_jacobian_batch(mech, params, values, qpos, JacobianPlan.for_mechanism(nominal))
     s = len(_closure(nominal).shared)
     assert (s, s + 3 * nominal.n_targets, len(qpos)) in calls  # the reduced system too

@@ -1,11 +1,14 @@
-"""Batched forward kinematics on the compiled kernels: the arrays they read, built from the MJCF.
+"""The compiled kernels' side in Python: the arrays they read, built from the MJCF.
 
-twin.kinematics_batch calls :func:`solve_compiled` for every machine whose closure system the
-kernels handle (all but an under-determined reduced system, which goes through the numpy
-path). The structure arrays (tree, closures, elimination columns, joint motions) depend only on
-the machine's structure and are kept with its :class:`~twin.kinematics_fast.KinematicStructure`;
-the numbers (body and joint frames, site offsets) are read from the model at every call, so an
-edited model (an injected error, an effect) is followed exactly as by ``mj_kinematics``.
+twin.kinematics_batch calls :func:`solve_compiled` (forward kinematics) and
+twin.sensitivity_batch :func:`implicit_term_compiled` (the identification Jacobian's adjoint
+solve and contraction) for every machine whose closure system the kernels handle (all but an
+under-determined reduced system, and for the Jacobian an over-determined one: those go
+through the numpy path). The structure arrays (tree, closures, elimination columns, joint
+motions) depend only on the machine's structure and are kept with its
+:class:`~twin.kinematics_fast.KinematicStructure`; the numbers (body and joint frames, site
+offsets) are read from the model at every call, so an edited model (an injected error, an
+effect) is followed exactly as by ``mj_kinematics``.
 """
 
 from __future__ import annotations
@@ -173,7 +176,7 @@ def solve_compiled(
     on every array: qs the closed configurations, out_pos (n, S, 3) the output sites,
     out_rot (n, 3, 3) the tool's rotation, residual and iterations (n,). ``settings``: the
     Newton's (tolerance, accept, max_iter, max_step), those of twin.kinematics."""
-    from twin.kinematics_compiled_newton import newton_batch  # compiles on first use
+    from twin.kinematics_compiled_kernels import newton_batch  # compiles on first use
 
     newton_batch(
         qs,
@@ -227,6 +230,42 @@ def run_chunks(work: Callable[[slice], None], chunks: Sequence[slice]) -> None:
         f.result()
 
 
+def implicit_term_compiled(
+    plan: CompiledPlan,
+    site_pos: np.ndarray,
+    axes: np.ndarray,
+    anchors: np.ndarray,
+    jt: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    affected: np.ndarray,
+) -> np.ndarray:
+    """The identification Jacobian's implicit term ``z^T c_pi`` (N, m, n) on the compiled
+    kernel (twin.kinematics_compiled_kernels.implicit_batch), from the numpy path's arrays:
+    the closure sites' positions (3, 2C, N), the free dofs' axes and anchors (3, n_free, N),
+    the outputs' motion ``jt`` (n_free, m, N), the screws ``v``, ``w`` (3, n, N) and which
+    parameter moves which closure site, ``affected`` (2C, n). Square closure systems only."""
+    from twin.kinematics_compiled_kernels import implicit_batch  # compiles on first use
+
+    site, par = np.nonzero(affected)
+    n_pose, m_rhs, n_par = jt.shape[2], jt.shape[1], v.shape[1]
+    out = np.empty((n_pose, m_rhs, n_par))
+    implicit_batch(
+        np.ascontiguousarray(site_pos.transpose(2, 1, 0)),
+        np.ascontiguousarray(axes.transpose(2, 1, 0)),
+        np.ascontiguousarray(anchors.transpose(2, 1, 0)),
+        np.ascontiguousarray(jt.transpose(2, 0, 1)),
+        np.ascontiguousarray(v.transpose(2, 1, 0)),
+        np.ascontiguousarray(w.transpose(2, 1, 0)),
+        _ints(site),
+        _ints(par),
+        plan.closure,
+        plan.dofs[4],
+        out,
+    )
+    return out
+
+
 WARM_UP_MODEL = """
 <mujoco>
   <worldbody>
@@ -248,13 +287,18 @@ WARM_UP_MODEL = """
 
 
 def warm_up() -> None:
-    """Compile the kernels into numba's cache now (``make setup`` calls this: the first
-    compilation takes tens of seconds, which a test run or a scenario should not pay)."""
+    """Compile the kernels (forward kinematics, the identification Jacobian's implicit term)
+    into numba's cache now (``make setup`` calls this: the first compilation takes tens of
+    seconds, which a test run or a scenario should not pay)."""
     from twin.kinematics_batch import forward_batch
     from twin.mechanism import Mechanism
 
     mech = Mechanism.from_xml_string(WARM_UP_MODEL)
     forward_batch(mech, np.array([[0.1]]))
+    plan = compiled_plan(FastKinematics(mech))
+    one = np.ones((3, 6, 1))  # the identification Jacobian's kernel: any numbers will do
+    pos, screw = np.ones((3, 2, 1)), np.ones((3, 1, 1))
+    implicit_term_compiled(plan, pos, one, one, one, screw, screw, np.ones((2, 1), bool))
 
 
 if __name__ == "__main__":
