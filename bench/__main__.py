@@ -1,7 +1,8 @@
 """Speed benchmark (``make bench``): results/bench.json and results/bench.md.
 
 * forward kinematics of the hexapod, the polisher and the serial arm: single pose and batched
-  (twin.kinematics_batch.forward_batch, 10,000 poses, best of 2), poses per second (bench.fk);
+  (twin.kinematics_batch.forward_batch, 10,000 poses, best of 2, on the compiled kernels and
+  on the numpy path alternately), poses per second (bench.fk);
 * identification on each machine (bench.machines): ours (calib.identify, robust by default and
   plain least squares) against scipy.optimize.least_squares with a finite-difference Jacobian
   on a fresh model over the same free parameters with tolerances as tight as ours, best of N,
@@ -62,7 +63,8 @@ def main() -> None:
         row = fk_rates(m.truth, m.obs.commands)
         print(
             f"{name}: FK single {row['fk_single_ms']:.3f} ms/pose, batched "
-            f"{row['fk_batch_poses_per_s']:.0f} poses/s ({row['fk_batch_speedup_vs_single']:.1f}x)",
+            f"{row['fk_batch_poses_per_s']:.0f} poses/s ({row['fk_batch_speedup_vs_single']:.1f}x; "
+            f"numpy path {row['fk_batch_numpy_poses_per_s']:.0f} poses/s)",
             flush=True,
         )
         row.update(compare(m, REPEATS[name]))
