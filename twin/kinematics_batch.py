@@ -2,14 +2,16 @@
 
 A serial chain (no free dof) needs no Newton: one kinematics pass.
 
-Each Newton step computes the frames of every pose with the numpy kinematic tree
-(twin.kinematics_tree: MuJoCo's ``mj_kinematics`` vectorised over poses), the closure
-residual and Jacobian from them, and the step by elimination per closure
-(twin.kinematics_reduced: each limb's private joints eliminated, a small system over the
-shared ones). Steps, damping of long steps, tolerance, stall rule and failure are those of
-the single-pose solve; each pose is checked against the same tolerance, and a pose that fails
-raises. Chunks of poses may run on a thread pool, but numpy holds the GIL between its many
-short operations: measured on 2 cores, a second thread adds at most ~10 %.
+Two engines, the same algorithm: by default the compiled kernels (twin.kinematics_compiled:
+each pose's whole Newton in machine code, chunks of poses side by side on threads, since the
+kernels release the GIL), else the numpy path, vectorised over poses. There each Newton step
+computes the frames of every pose with the numpy kinematic tree (twin.kinematics_tree:
+MuJoCo's ``mj_kinematics`` vectorised over poses), the closure residual and Jacobian from
+them, and the step by elimination per closure (twin.kinematics_reduced: each limb's private
+joints eliminated, a small system over the shared ones); numpy holds the GIL between its many
+short operations, so a second thread adds at most ~10 %. Steps, damping of long steps,
+tolerance, stall rule and failure are those of the single-pose solve; each pose is checked
+against the same tolerance, and a pose that fails raises.
 """
 
 from __future__ import annotations
