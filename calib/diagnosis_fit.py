@@ -128,11 +128,27 @@ def heldout_sse(prob: Problem, xs: list[np.ndarray], f: Fit, poses: np.ndarray) 
     return np.sum(e**2, axis=1)
 
 
-def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> np.ndarray:
-    """Columns of the candidate at every shape of ``grid`` (S, N, R, k), cached per grid."""
+@dataclass(frozen=True)
+class GridDesign:
+    """A candidate's columns at every shape of a grid, laid out for scans over many training
+    sets: ``x`` (N*R, S*k), the shapes side by side, and each pose's Gram matrices X_n^T X_n
+    ``gram`` (N, S*k*k)."""
+
+    x: np.ndarray
+    gram: np.ndarray
+    n_shapes: int
+    k: int
+
+
+def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridDesign:
+    """Columns of the candidate at every shape of ``grid``, cached per grid."""
     key = (cand.name, id(ctx), np.asarray(grid, float).tobytes())
     if key not in prob._cache:
-        prob._cache[key] = np.stack([cand.design(ctx, float(v)) for v in grid])
+        x = np.stack([cand.design(ctx, float(v)) for v in grid], axis=1)  # (N, S, R, k)
+        n, n_shapes, r, k = x.shape
+        gram = np.matmul(x.transpose(0, 1, 3, 2), x).reshape(n, -1)  # (N, S*k*k)
+        x = x.transpose(0, 2, 1, 3).reshape(n * r, n_shapes * k)  # a copy: rows, then shapes
+        prob._cache[key] = GridDesign(x, gram, n_shapes, k)
     return prob._cache[key]
 
 
@@ -171,32 +187,62 @@ def rss_over_grid(
     proj: Projection | None = None,
 ) -> np.ndarray:
     """Training RSS of geometry + ``fixed`` + candidate at each shape (unconstrained);
-    ``proj``: :func:`projection` of the same ``fixed`` and poses, if already computed."""
+    ``proj``: :func:`projection` of the same ``fixed`` and poses, if already computed.
+    ``cache``: the grid's columns computed once for every training set (a grid scan)."""
     proj = projection(prob, fixed, poses) if proj is None else proj
-    q, rp, base = proj.q, proj.rp, proj.base
-    if cache:  # np.take: the rows of [:, poses], contiguous without a second copy
-        x_all = np.take(grid_designs(prob, cand, ctx, grid), np.flatnonzero(poses), axis=1)
+    if cache:
+        ata, atb = _normal_equations_cached(grid_designs(prob, cand, ctx, grid), proj, poses)
     else:
-        x_all = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
-    x_all = x_all.reshape(len(grid), proj.m, -1)  # (S, m, k)
+        ata, atb = _normal_equations(cand, ctx, grid, poses, proj)
     out = np.empty(len(grid))
     for lo in range(0, len(grid), 64):
-        x = x_all[lo : lo + 64]
-        qx = np.matmul(q.T, x)  # (S, r, k)
-        ata = np.matmul(x.transpose(0, 2, 1), x) - np.matmul(qx.transpose(0, 2, 1), qx)
-        atb = np.matmul(x.transpose(0, 2, 1), rp)  # rp is orthogonal to q already
-        d = np.sqrt(np.clip(np.einsum("skk->sk", ata), 0, None))
-        d[d < 1e-300] = 1.0
-        a_n = ata / d[:, :, None] / d[:, None, :]
-        b_n = atb / d
-        k = a_n.shape[1]
-        a_n = a_n + RCOND * np.eye(k)[None] * 1e2
-        try:
-            sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
-        except np.linalg.LinAlgError:
-            sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
-        out[lo : lo + 64] = base - np.einsum("sk,sk->s", b_n, sol)
+        out[lo : lo + 64] = proj.base - _explained(ata[lo : lo + 64], atb[lo : lo + 64])
     return out
+
+
+def _normal_equations(
+    cand: Candidate, ctx: Context, grid, poses: np.ndarray, proj: Projection
+) -> tuple[np.ndarray, np.ndarray]:
+    """X^T (I - Q Q^T) X (S, k, k) and X^T rp (S, k) at each shape, from the designs."""
+    x = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
+    x = x.reshape(len(grid), proj.m, -1)  # (S, m, k)
+    qx = np.matmul(proj.q.T, x)  # (S, r, k)
+    ata = np.matmul(x.transpose(0, 2, 1), x) - np.matmul(qx.transpose(0, 2, 1), qx)
+    atb = np.matmul(x.transpose(0, 2, 1), proj.rp)  # rp is orthogonal to q already
+    return ata, atb
+
+
+def _normal_equations_cached(
+    design: GridDesign, proj: Projection, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`_normal_equations` from the grid's cached columns: Q and rp padded with zero
+    rows for the poses outside the training set, one product for all shapes, X^T X as the sum
+    of the training poses' Gram matrices."""
+    n, s, k = len(poses), design.n_shapes, design.k
+    q = np.zeros((n, proj.m // int(np.sum(poses)), proj.q.shape[1]))
+    q[poses] = proj.q.reshape(-1, q.shape[1], q.shape[2])
+    rp = np.zeros(q.shape[:2])
+    rp[poses] = proj.rp.reshape(-1, q.shape[1])
+    qx = (q.reshape(-1, q.shape[2]).T @ design.x).reshape(-1, s, k)  # (r, S, k)
+    xtx = (np.asarray(poses, float) @ design.gram).reshape(s, k, k)
+    ata = xtx - np.einsum("rsi,rsj->sij", qx, qx)
+    atb = (rp.reshape(-1) @ design.x).reshape(s, k)
+    return ata, atb
+
+
+def _explained(ata: np.ndarray, atb: np.ndarray) -> np.ndarray:
+    """b^T A^-1 b at each shape, on the column-normalised normal equations."""
+    d = np.sqrt(np.clip(np.einsum("skk->sk", ata), 0, None))
+    d[d < 1e-300] = 1.0
+    a_n = ata / d[:, :, None] / d[:, None, :]
+    b_n = atb / d
+    k = a_n.shape[1]
+    a_n = a_n + RCOND * np.eye(k)[None] * 1e2
+    try:
+        sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
+    return np.einsum("sk,sk->s", b_n, sol)
 
 
 def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = None) -> float:
