@@ -144,7 +144,7 @@ def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridDesi
     """Columns of the candidate at every shape of ``grid``, cached per grid."""
     key = (cand.name, id(ctx), np.asarray(grid, float).tobytes())
     if key not in prob._cache:
-        x = np.stack([cand.design(ctx, float(v)) for v in grid], axis=1)  # (N, S, R, k)
+        x = cand.designs(ctx, grid)  # (N, S, R, k)
         n, n_shapes, r, k = x.shape
         gram = np.matmul(x.transpose(0, 1, 3, 2), x).reshape(n, -1)  # (N, S*k*k)
         x = x.transpose(0, 2, 1, 3).reshape(n * r, n_shapes * k)  # a copy: rows, then shapes

@@ -55,3 +55,12 @@ def test_cached_scan_matches_the_reference(setup, scheme):
                 fast = rss_over_grid(prob, fixed, cand, ctx, grid, train, cache=True, proj=proj)
                 ref = rss_over_grid(prob, fixed, cand, ctx, grid[some], train, proj=proj)
                 np.testing.assert_allclose(fast[some], ref, rtol=0, atol=1e-12 * proj.base)
+
+
+def test_designs_of_a_grid_are_the_designs_of_each_shape(setup):
+    ctx, _ = setup
+    for cand in library(ctx, masses_defaulted=True):
+        grid = np.asarray(cand.grid(ctx), dtype=float)[:50] if cand.shaped else [np.nan]
+        many = cand.designs(ctx, grid)
+        each = np.stack([cand.design(ctx, float(s)) for s in grid], axis=1)
+        np.testing.assert_allclose(many, each, rtol=1e-14, atol=1e-15 * np.max(np.abs(each)))
