@@ -27,6 +27,7 @@ N_FINALISTS = 3
 INNER_FOLDS = 4
 RCOND = 1e-10
 REFINE_XTOL = 1e-2  # a shape refined to 1 % of the span between its grid neighbours
+GRID_CHUNK = 64  # shapes whose columns are formed at once in a grid scan
 
 
 def fold_labels(time: np.ndarray, folds: int, scheme: str, seed: int = 0) -> np.ndarray:
@@ -141,14 +142,22 @@ class GridDesign:
 
 
 def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridDesign:
-    """Columns of the candidate at every shape of ``grid``, cached per grid."""
+    """Columns of the candidate at every shape of ``grid``, cached per grid (built in chunks
+    of shapes: no temporary of the whole grid's size besides the result)."""
     key = (cand.name, id(ctx), np.asarray(grid, float).tobytes())
     if key not in prob._cache:
-        x = cand.designs(ctx, grid)  # (N, S, R, k)
-        n, n_shapes, r, k = x.shape
-        gram = np.matmul(x.transpose(0, 1, 3, 2), x).reshape(n, -1)  # (N, S*k*k)
-        x = x.transpose(0, 2, 1, 3).reshape(n * r, n_shapes * k)  # a copy: rows, then shapes
-        prob._cache[key] = GridDesign(x, gram, n_shapes, k)
+        grid = np.asarray(grid, dtype=float)
+        x = gram = None
+        for lo in range(0, len(grid), GRID_CHUNK):
+            xc = cand.designs(ctx, grid[lo : lo + GRID_CHUNK])  # (N, s, R, k)
+            if x is None:
+                n, _, r, k = xc.shape
+                x = np.empty((n, r, len(grid), k))
+                gram = np.empty((n, len(grid), k, k))
+            x[:, :, lo : lo + GRID_CHUNK] = xc.transpose(0, 2, 1, 3)
+            gram[:, lo : lo + GRID_CHUNK] = np.matmul(xc.transpose(0, 1, 3, 2), xc)
+        assert x is not None and gram is not None
+        prob._cache[key] = GridDesign(x.reshape(n * r, -1), gram.reshape(n, -1), len(grid), k)
     return prob._cache[key]
 
 
@@ -223,9 +232,9 @@ def _normal_equations_cached(
     q[poses] = proj.q.reshape(-1, q.shape[1], q.shape[2])
     rp = np.zeros(q.shape[:2])
     rp[poses] = proj.rp.reshape(-1, q.shape[1])
-    qx = (q.reshape(-1, q.shape[2]).T @ design.x).reshape(-1, s, k)  # (r, S, k)
+    qx = (design.x.T @ q.reshape(-1, q.shape[2])).reshape(s, k, -1)  # (S, k, r)
     xtx = (np.asarray(poses, float) @ design.gram).reshape(s, k, k)
-    ata = xtx - np.einsum("rsi,rsj->sij", qx, qx)
+    ata = xtx - np.matmul(qx, qx.transpose(0, 2, 1))
     atb = (rp.reshape(-1) @ design.x).reshape(s, k)
     return ata, atb
 
