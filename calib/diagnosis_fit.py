@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize
 
 from calib.diagnosis_candidates import NO_SHAPE, Candidate
 from calib.diagnosis_context import Context
@@ -52,6 +51,19 @@ def _orth(a: np.ndarray) -> np.ndarray:
     return u[:, keep]
 
 
+def orth_and_pinv(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_orth(a)`` and ``np.linalg.pinv(a, rcond=RCOND)`` from one SVD (numpy's pinv
+    arithmetic step for step, so the same numbers)."""
+    if a.size == 0:
+        return _orth(a), np.linalg.pinv(a, rcond=RCOND)
+    u, s, vt = np.linalg.svd(a, full_matrices=False)
+    q = u[:, s > RCOND * max(s[0], 1e-300)]
+    large = s > RCOND * np.max(s)
+    inv = np.divide(1, s, where=large, out=s.copy())
+    inv[~large] = 0
+    return q, np.matmul(vt.T, np.multiply(inv[:, None], u.T))
+
+
 @dataclass
 class Problem:
     """The geometric residual and columns, with cached projection bases per training set."""
@@ -75,10 +87,8 @@ class Problem:
             g, _ = self.rows(poses)
             scale = np.linalg.norm(g, axis=0)
             scale[scale == 0] = 1.0
-            self._cache[key] = (
-                _orth(g / scale),
-                np.linalg.pinv(g / scale, rcond=RCOND) / scale[:, None],
-            )
+            q, gplus = orth_and_pinv(g / scale)
+            self._cache[key] = (q, gplus / scale[:, None])
         return self._cache[key]
 
 
@@ -114,7 +124,9 @@ def fit(
     if np.any(live):
         a, sc = xp[:, live] / scale[live], scale[live]
         if lower is not None and np.any(np.isfinite(lower[live])):
-            res = optimize.lsq_linear(a, rp, bounds=(lower[live] * sc, np.inf), method="bvls")
+            from scipy.optimize import lsq_linear  # lazy: scipy.optimize costs 0.7 s
+
+            res = lsq_linear(a, rp, bounds=(lower[live] * sc, np.inf), method="bvls")
             theta[live] = res.x / sc
         else:
             theta[live] = np.linalg.lstsq(a, rp, rcond=RCOND)[0] / sc
@@ -271,7 +283,9 @@ def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = No
         return float(rss_over_grid(prob, fixed, cand, ctx, [v], poses, proj=proj)[0])
 
     a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
-    res = optimize.minimize_scalar(
+    from scipy.optimize import minimize_scalar  # lazy: scipy.optimize costs 0.7 s
+
+    res = minimize_scalar(
         cost, bounds=(a, b), method="bounded", options={"xatol": REFINE_XTOL * abs(b - a) + 1e-15}
     )
     return float(np.exp(res.x)) if cand.shape_log else float(res.x)

@@ -9,7 +9,15 @@ import pytest
 
 from calib.diagnosis_candidates import library
 from calib.diagnosis_context import Context
-from calib.diagnosis_fit import Problem, fold_labels, projection, rss_over_grid
+from calib.diagnosis_fit import (
+    RCOND,
+    Problem,
+    _orth,
+    fold_labels,
+    orth_and_pinv,
+    projection,
+    rss_over_grid,
+)
 
 N, T, A, P = 60, 3, 6, 12
 
@@ -64,3 +72,13 @@ def test_designs_of_a_grid_are_the_designs_of_each_shape(setup):
         many = cand.designs(ctx, grid)
         each = np.stack([cand.design(ctx, float(s)) for s in grid], axis=1)
         np.testing.assert_allclose(many, each, rtol=1e-14, atol=1e-15 * np.max(np.abs(each)))
+
+
+def test_orth_and_pinv_from_one_svd_are_numpys(setup):
+    _, prob = setup
+    rng = np.random.default_rng(5)
+    deficient = prob.geo[:40].reshape(-1, P) @ np.diag([1.0] * (P - 1) + [0.0])
+    for a in (prob.geo[:40].reshape(-1, P), deficient, rng.normal(size=(30, 4)) * 1e-3):
+        q, gplus = orth_and_pinv(a)
+        np.testing.assert_array_equal(q, _orth(a))
+        np.testing.assert_array_equal(gplus, np.linalg.pinv(a, rcond=RCOND))
