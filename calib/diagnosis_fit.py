@@ -27,6 +27,11 @@ INNER_FOLDS = 4
 RCOND = 1e-10
 REFINE_XTOL = 1e-2  # a shape refined to 1 % of the span between its grid neighbours
 GRID_CHUNK = 64  # shapes whose columns are formed at once in a grid scan
+# an actuator-level candidate's scan through its offsets (products over poses, not rows) from
+# this many shapes on; smaller grids keep the columns themselves, whose X^T X - X^T Q Q^T X
+# rounds as the per-shape reference does (the factored form can differ by ~1e-11 relative
+# where the columns lie almost in the geometry's span)
+FACTORED_MIN_SHAPES = 64
 
 
 def fold_labels(time: np.ndarray, folds: int, scheme: str, seed: int = 0) -> np.ndarray:
@@ -174,6 +179,43 @@ def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridDesi
 
 
 @dataclass(frozen=True)
+class GridOffsets:
+    """An actuator-level candidate's grid kept as its offsets: X(s) = J_act O(s), O nonzero
+    only at the (actuator ``act[p]``, parameter ``col[p]``) pairs p, ``o`` (P, N, S); ``j``
+    (N, R, A) is J_act with the rejected rows zeroed. A training set's normal equations then
+    cost products over the poses, not over every residual row."""
+
+    o: np.ndarray
+    act: np.ndarray
+    col: np.ndarray
+    j: np.ndarray
+    k: int
+
+
+def grid_offsets(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridOffsets:
+    """The offsets of an actuator-level candidate at every shape of ``grid``, cached."""
+    key = ("offsets", cand.name, id(ctx), np.asarray(grid, float).tobytes())
+    if key not in prob._cache:
+        assert cand.offsets is not None and ctx.j_act is not None
+        grid = np.asarray(grid, dtype=float)
+        chunks = []
+        for lo in range(0, len(grid), GRID_CHUNK):
+            chunks.append(
+                np.stack([cand.offsets(ctx, float(v)) for v in grid[lo : lo + GRID_CHUNK]], axis=1)
+            )  # (N, s, A, k)
+        used = np.zeros(chunks[0].shape[2:], bool)
+        for oc in chunks:
+            used |= np.any(oc != 0, axis=(0, 1))
+        act, col = np.nonzero(used)
+        o = np.concatenate([oc[:, :, act, col] for oc in chunks], axis=1)  # (N, S, P)
+        j = ctx.j_act if ctx.rows is None else ctx.j_act * ctx.rows[:, :, None]
+        prob._cache[key] = GridOffsets(
+            np.ascontiguousarray(o.transpose(2, 0, 1)), act, col, j, used.shape[1]
+        )
+    return prob._cache[key]
+
+
+@dataclass(frozen=True)
 class Projection:
     """The training residual with the geometry and the ``fixed`` columns projected out."""
 
@@ -211,7 +253,9 @@ def rss_over_grid(
     ``proj``: :func:`projection` of the same ``fixed`` and poses, if already computed.
     ``cache``: the grid's columns computed once for every training set (a grid scan)."""
     proj = projection(prob, fixed, poses) if proj is None else proj
-    if cache:
+    if cache and cand.offsets is not None and len(grid) >= FACTORED_MIN_SHAPES:
+        ata, atb = _normal_equations_offsets(grid_offsets(prob, cand, ctx, grid), proj, poses)
+    elif cache:
         ata, atb = _normal_equations_cached(grid_designs(prob, cand, ctx, grid), proj, poses)
     else:
         ata, atb = _normal_equations(cand, ctx, grid, poses, proj)
@@ -239,15 +283,48 @@ def _normal_equations_cached(
     """As :func:`_normal_equations` from the grid's cached columns: Q and rp padded with zero
     rows for the poses outside the training set, one product for all shapes, X^T X as the sum
     of the training poses' Gram matrices."""
-    n, s, k = len(poses), design.n_shapes, design.k
-    q = np.zeros((n, proj.m // int(np.sum(poses)), proj.q.shape[1]))
-    q[poses] = proj.q.reshape(-1, q.shape[1], q.shape[2])
-    rp = np.zeros(q.shape[:2])
-    rp[poses] = proj.rp.reshape(-1, q.shape[1])
+    s, k = design.n_shapes, design.k
+    q, rp = _padded(proj, poses)
     qx = (design.x.T @ q.reshape(-1, q.shape[2])).reshape(s, k, -1)  # (S, k, r)
     xtx = (np.asarray(poses, float) @ design.gram).reshape(s, k, k)
     ata = xtx - np.matmul(qx, qx.transpose(0, 2, 1))
     atb = (rp.reshape(-1) @ design.x).reshape(s, k)
+    return ata, atb
+
+
+def _padded(proj: Projection, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Q (N, R, r) and rp (N, R) of the projection, zero at the poses outside the set."""
+    n = len(poses)
+    q = np.zeros((n, proj.m // int(np.sum(poses)), proj.q.shape[1]))
+    q[poses] = proj.q.reshape(-1, q.shape[1], q.shape[2])
+    rp = np.zeros(q.shape[:2])
+    rp[poses] = proj.rp.reshape(-1, q.shape[1])
+    return q, rp
+
+
+def _normal_equations_offsets(
+    g: GridOffsets, proj: Projection, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`_normal_equations` for X(s) = J_act O(s): with W_n = Q_n^T J_n, M_n = J_n^T J_n
+    and c_n = J_n^T rp_n per pose, Q^T X, X^T X and X^T rp are sums over the training poses
+    of W_n O_n, O_n^T M_n O_n and O_n^T c_n."""
+    q, rp = _padded(proj, poses)
+    w = np.matmul(q.transpose(0, 2, 1), g.j)  # (N, r, A)
+    c = np.einsum("nr,nra->na", rp, g.j)  # (N, A)
+    m = np.matmul(g.j.transpose(0, 2, 1), g.j) * np.asarray(poses, float)[:, None, None]
+    pick = np.zeros((g.k, len(g.act)))  # parameter <- pair
+    pick[g.col, np.arange(len(g.act))] = 1.0
+    qx = np.matmul(w[:, :, g.act].transpose(2, 1, 0), g.o)  # (P, r, S)
+    qx = np.tensordot(pick, qx, axes=1)  # (k, r, S)
+    n_pairs = len(g.act)
+    gram = np.empty((n_pairs, n_pairs, g.o.shape[2]))
+    for a in range(n_pairs):
+        for b in range(a, n_pairs):
+            gram[a, b] = gram[b, a] = (g.o[a] * g.o[b]).T @ m[:, g.act[a], g.act[b]]
+    xtx = np.einsum("ip,pqs,jq->sij", pick, gram, pick)
+    qxs = qx.transpose(2, 0, 1)  # (S, k, r)
+    ata = xtx - np.matmul(qxs, qxs.transpose(0, 2, 1))
+    atb = (pick @ np.matmul(c[:, g.act].T[:, None, :], g.o)[:, 0, :]).T  # (S, k)
     return ata, atb
 
 

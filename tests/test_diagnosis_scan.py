@@ -12,8 +12,11 @@ from calib.diagnosis_context import Context
 from calib.diagnosis_fit import (
     RCOND,
     Problem,
+    _explained,
+    _normal_equations_offsets,
     _orth,
     fold_labels,
+    grid_offsets,
     orth_and_pinv,
     projection,
     rss_over_grid,
@@ -82,3 +85,25 @@ def test_orth_and_pinv_from_one_svd_are_numpys(setup):
         q, gplus = orth_and_pinv(a)
         np.testing.assert_array_equal(q, _orth(a))
         np.testing.assert_array_equal(gplus, np.linalg.pinv(a, rcond=RCOND))
+
+
+def test_factored_scan_of_actuator_offsets_matches_the_reference(setup):
+    """The scan through the offsets (used on large grids) on every actuator-level candidate."""
+    ctx, prob = setup
+    labels = fold_labels(ctx.time, 5, "random")
+    backlash = next(c for c in library(ctx, True) if c.name == "backlash").design(ctx)
+    for cand in library(ctx, masses_defaulted=True):
+        if not cand.shaped or cand.offsets is None:
+            continue
+        grid = np.asarray(cand.grid(ctx), dtype=float)
+        some = np.unique(np.linspace(0, len(grid) - 1, 40).astype(int))
+        for f in (1, 4):
+            train = labels != f
+            for fixed in ([], [backlash]):
+                proj = projection(prob, fixed, train)
+                ata, atb = _normal_equations_offsets(
+                    grid_offsets(prob, cand, ctx, grid), proj, train
+                )
+                fast = proj.base - _explained(ata[some], atb[some])
+                ref = rss_over_grid(prob, fixed, cand, ctx, grid[some], train, proj=proj)
+                np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * proj.base)
