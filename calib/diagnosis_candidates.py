@@ -87,6 +87,17 @@ class Candidate:
             x = np.einsum("nra,nak->nrk", ctx.j_act, self.offsets(ctx, shape))
         return x if ctx.rows is None else x * ctx.rows[:, :, None]
 
+    def designs(self, ctx: Context, shapes) -> np.ndarray:
+        """Identification columns (N, S, R, k) at these poses for each of ``shapes``: the
+        values of :meth:`design` (the actuator offsets of all shapes through J_act at once)."""
+        if self.columns is not None:
+            x = np.stack([self.columns(ctx, float(s)) for s in shapes], axis=1)
+        else:
+            assert self.offsets is not None and ctx.j_act is not None
+            o = np.stack([self.offsets(ctx, float(s)) for s in shapes], axis=1)  # (N, S, A, k)
+            x = np.matmul(ctx.j_act[:, None], o)
+        return x if ctx.rows is None else x * ctx.rows[:, None, :, None]
+
     @property
     def regressor(self) -> Offsets | None:  # the former name of the offsets function
         return self.offsets

@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize
 
 from calib.diagnosis_candidates import NO_SHAPE, Candidate
 from calib.diagnosis_context import Context
@@ -27,6 +26,12 @@ N_FINALISTS = 3
 INNER_FOLDS = 4
 RCOND = 1e-10
 REFINE_XTOL = 1e-2  # a shape refined to 1 % of the span between its grid neighbours
+GRID_CHUNK = 64  # shapes whose columns are formed at once in a grid scan
+# an actuator-level candidate's scan through its offsets (products over poses, not rows) from
+# this many shapes on; smaller grids keep the columns themselves, whose X^T X - X^T Q Q^T X
+# rounds as the per-shape reference does (the factored form can differ by ~1e-11 relative
+# where the columns lie almost in the geometry's span)
+FACTORED_MIN_SHAPES = 64
 
 
 def fold_labels(time: np.ndarray, folds: int, scheme: str, seed: int = 0) -> np.ndarray:
@@ -49,6 +54,19 @@ def _orth(a: np.ndarray) -> np.ndarray:
     u, s, _ = np.linalg.svd(a, full_matrices=False)
     keep = s > RCOND * max(s[0], 1e-300)
     return u[:, keep]
+
+
+def orth_and_pinv(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``_orth(a)`` and ``np.linalg.pinv(a, rcond=RCOND)`` from one SVD (numpy's pinv
+    arithmetic step for step, so the same numbers)."""
+    if a.size == 0:
+        return _orth(a), np.linalg.pinv(a, rcond=RCOND)
+    u, s, vt = np.linalg.svd(a, full_matrices=False)
+    q = u[:, s > RCOND * max(s[0], 1e-300)]
+    large = s > RCOND * np.max(s)
+    inv = np.divide(1, s, where=large, out=s.copy())
+    inv[~large] = 0
+    return q, np.matmul(vt.T, np.multiply(inv[:, None], u.T))
 
 
 @dataclass
@@ -74,10 +92,8 @@ class Problem:
             g, _ = self.rows(poses)
             scale = np.linalg.norm(g, axis=0)
             scale[scale == 0] = 1.0
-            self._cache[key] = (
-                _orth(g / scale),
-                np.linalg.pinv(g / scale, rcond=RCOND) / scale[:, None],
-            )
+            q, gplus = orth_and_pinv(g / scale)
+            self._cache[key] = (q, gplus / scale[:, None])
         return self._cache[key]
 
 
@@ -113,7 +129,9 @@ def fit(
     if np.any(live):
         a, sc = xp[:, live] / scale[live], scale[live]
         if lower is not None and np.any(np.isfinite(lower[live])):
-            res = optimize.lsq_linear(a, rp, bounds=(lower[live] * sc, np.inf), method="bvls")
+            from scipy.optimize import lsq_linear  # lazy: scipy.optimize costs 0.7 s
+
+            res = lsq_linear(a, rp, bounds=(lower[live] * sc, np.inf), method="bvls")
             theta[live] = res.x / sc
         else:
             theta[live] = np.linalg.lstsq(a, rp, rcond=RCOND)[0] / sc
@@ -128,11 +146,72 @@ def heldout_sse(prob: Problem, xs: list[np.ndarray], f: Fit, poses: np.ndarray) 
     return np.sum(e**2, axis=1)
 
 
-def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> np.ndarray:
-    """Columns of the candidate at every shape of ``grid`` (S, N, R, k), cached per grid."""
+@dataclass(frozen=True)
+class GridDesign:
+    """A candidate's columns at every shape of a grid, laid out for scans over many training
+    sets: ``x`` (N*R, S*k), the shapes side by side, and each pose's Gram matrices X_n^T X_n
+    ``gram`` (N, S*k*k)."""
+
+    x: np.ndarray
+    gram: np.ndarray
+    n_shapes: int
+    k: int
+
+
+def grid_designs(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridDesign:
+    """Columns of the candidate at every shape of ``grid``, cached per grid (built in chunks
+    of shapes: no temporary of the whole grid's size besides the result)."""
     key = (cand.name, id(ctx), np.asarray(grid, float).tobytes())
     if key not in prob._cache:
-        prob._cache[key] = np.stack([cand.design(ctx, float(v)) for v in grid])
+        grid = np.asarray(grid, dtype=float)
+        x = gram = None
+        for lo in range(0, len(grid), GRID_CHUNK):
+            xc = cand.designs(ctx, grid[lo : lo + GRID_CHUNK])  # (N, s, R, k)
+            if x is None:
+                n, _, r, k = xc.shape
+                x = np.empty((n, r, len(grid), k))
+                gram = np.empty((n, len(grid), k, k))
+            x[:, :, lo : lo + GRID_CHUNK] = xc.transpose(0, 2, 1, 3)
+            gram[:, lo : lo + GRID_CHUNK] = np.matmul(xc.transpose(0, 1, 3, 2), xc)
+        assert x is not None and gram is not None
+        prob._cache[key] = GridDesign(x.reshape(n * r, -1), gram.reshape(n, -1), len(grid), k)
+    return prob._cache[key]
+
+
+@dataclass(frozen=True)
+class GridOffsets:
+    """An actuator-level candidate's grid kept as its offsets: X(s) = J_act O(s), O nonzero
+    only at the (actuator ``act[p]``, parameter ``col[p]``) pairs p, ``o`` (P, N, S); ``j``
+    (N, R, A) is J_act with the rejected rows zeroed. A training set's normal equations then
+    cost products over the poses, not over every residual row."""
+
+    o: np.ndarray
+    act: np.ndarray
+    col: np.ndarray
+    j: np.ndarray
+    k: int
+
+
+def grid_offsets(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridOffsets:
+    """The offsets of an actuator-level candidate at every shape of ``grid``, cached."""
+    key = ("offsets", cand.name, id(ctx), np.asarray(grid, float).tobytes())
+    if key not in prob._cache:
+        assert cand.offsets is not None and ctx.j_act is not None
+        grid = np.asarray(grid, dtype=float)
+        chunks = []
+        for lo in range(0, len(grid), GRID_CHUNK):
+            chunks.append(
+                np.stack([cand.offsets(ctx, float(v)) for v in grid[lo : lo + GRID_CHUNK]], axis=1)
+            )  # (N, s, A, k)
+        used = np.zeros(chunks[0].shape[2:], bool)
+        for oc in chunks:
+            used |= np.any(oc != 0, axis=(0, 1))
+        act, col = np.nonzero(used)
+        o = np.concatenate([oc[:, :, act, col] for oc in chunks], axis=1)  # (N, S, P)
+        j = ctx.j_act if ctx.rows is None else ctx.j_act * ctx.rows[:, :, None]
+        prob._cache[key] = GridOffsets(
+            np.ascontiguousarray(o.transpose(2, 0, 1)), act, col, j, used.shape[1]
+        )
     return prob._cache[key]
 
 
@@ -171,32 +250,97 @@ def rss_over_grid(
     proj: Projection | None = None,
 ) -> np.ndarray:
     """Training RSS of geometry + ``fixed`` + candidate at each shape (unconstrained);
-    ``proj``: :func:`projection` of the same ``fixed`` and poses, if already computed."""
+    ``proj``: :func:`projection` of the same ``fixed`` and poses, if already computed.
+    ``cache``: the grid's columns computed once for every training set (a grid scan)."""
     proj = projection(prob, fixed, poses) if proj is None else proj
-    q, rp, base = proj.q, proj.rp, proj.base
-    if cache:  # np.take: the rows of [:, poses], contiguous without a second copy
-        x_all = np.take(grid_designs(prob, cand, ctx, grid), np.flatnonzero(poses), axis=1)
+    if cache and cand.offsets is not None and len(grid) >= FACTORED_MIN_SHAPES:
+        ata, atb = _normal_equations_offsets(grid_offsets(prob, cand, ctx, grid), proj, poses)
+    elif cache:
+        ata, atb = _normal_equations_cached(grid_designs(prob, cand, ctx, grid), proj, poses)
     else:
-        x_all = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
-    x_all = x_all.reshape(len(grid), proj.m, -1)  # (S, m, k)
+        ata, atb = _normal_equations(cand, ctx, grid, poses, proj)
     out = np.empty(len(grid))
     for lo in range(0, len(grid), 64):
-        x = x_all[lo : lo + 64]
-        qx = np.matmul(q.T, x)  # (S, r, k)
-        ata = np.matmul(x.transpose(0, 2, 1), x) - np.matmul(qx.transpose(0, 2, 1), qx)
-        atb = np.matmul(x.transpose(0, 2, 1), rp)  # rp is orthogonal to q already
-        d = np.sqrt(np.clip(np.einsum("skk->sk", ata), 0, None))
-        d[d < 1e-300] = 1.0
-        a_n = ata / d[:, :, None] / d[:, None, :]
-        b_n = atb / d
-        k = a_n.shape[1]
-        a_n = a_n + RCOND * np.eye(k)[None] * 1e2
-        try:
-            sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
-        except np.linalg.LinAlgError:
-            sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
-        out[lo : lo + 64] = base - np.einsum("sk,sk->s", b_n, sol)
+        out[lo : lo + 64] = proj.base - _explained(ata[lo : lo + 64], atb[lo : lo + 64])
     return out
+
+
+def _normal_equations(
+    cand: Candidate, ctx: Context, grid, poses: np.ndarray, proj: Projection
+) -> tuple[np.ndarray, np.ndarray]:
+    """X^T (I - Q Q^T) X (S, k, k) and X^T rp (S, k) at each shape, from the designs."""
+    x = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
+    x = x.reshape(len(grid), proj.m, -1)  # (S, m, k)
+    qx = np.matmul(proj.q.T, x)  # (S, r, k)
+    ata = np.matmul(x.transpose(0, 2, 1), x) - np.matmul(qx.transpose(0, 2, 1), qx)
+    atb = np.matmul(x.transpose(0, 2, 1), proj.rp)  # rp is orthogonal to q already
+    return ata, atb
+
+
+def _normal_equations_cached(
+    design: GridDesign, proj: Projection, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`_normal_equations` from the grid's cached columns: Q and rp padded with zero
+    rows for the poses outside the training set, one product for all shapes, X^T X as the sum
+    of the training poses' Gram matrices."""
+    s, k = design.n_shapes, design.k
+    q, rp = _padded(proj, poses)
+    qx = (design.x.T @ q.reshape(-1, q.shape[2])).reshape(s, k, -1)  # (S, k, r)
+    xtx = (np.asarray(poses, float) @ design.gram).reshape(s, k, k)
+    ata = xtx - np.matmul(qx, qx.transpose(0, 2, 1))
+    atb = (rp.reshape(-1) @ design.x).reshape(s, k)
+    return ata, atb
+
+
+def _padded(proj: Projection, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Q (N, R, r) and rp (N, R) of the projection, zero at the poses outside the set."""
+    n = len(poses)
+    q = np.zeros((n, proj.m // int(np.sum(poses)), proj.q.shape[1]))
+    q[poses] = proj.q.reshape(-1, q.shape[1], q.shape[2])
+    rp = np.zeros(q.shape[:2])
+    rp[poses] = proj.rp.reshape(-1, q.shape[1])
+    return q, rp
+
+
+def _normal_equations_offsets(
+    g: GridOffsets, proj: Projection, poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`_normal_equations` for X(s) = J_act O(s): with W_n = Q_n^T J_n, M_n = J_n^T J_n
+    and c_n = J_n^T rp_n per pose, Q^T X, X^T X and X^T rp are sums over the training poses
+    of W_n O_n, O_n^T M_n O_n and O_n^T c_n."""
+    q, rp = _padded(proj, poses)
+    w = np.matmul(q.transpose(0, 2, 1), g.j)  # (N, r, A)
+    c = np.einsum("nr,nra->na", rp, g.j)  # (N, A)
+    m = np.matmul(g.j.transpose(0, 2, 1), g.j) * np.asarray(poses, float)[:, None, None]
+    pick = np.zeros((g.k, len(g.act)))  # parameter <- pair
+    pick[g.col, np.arange(len(g.act))] = 1.0
+    qx = np.matmul(w[:, :, g.act].transpose(2, 1, 0), g.o)  # (P, r, S)
+    qx = np.tensordot(pick, qx, axes=1)  # (k, r, S)
+    n_pairs = len(g.act)
+    gram = np.empty((n_pairs, n_pairs, g.o.shape[2]))
+    for a in range(n_pairs):
+        for b in range(a, n_pairs):
+            gram[a, b] = gram[b, a] = (g.o[a] * g.o[b]).T @ m[:, g.act[a], g.act[b]]
+    xtx = np.einsum("ip,pqs,jq->sij", pick, gram, pick)
+    qxs = qx.transpose(2, 0, 1)  # (S, k, r)
+    ata = xtx - np.matmul(qxs, qxs.transpose(0, 2, 1))
+    atb = (pick @ np.matmul(c[:, g.act].T[:, None, :], g.o)[:, 0, :]).T  # (S, k)
+    return ata, atb
+
+
+def _explained(ata: np.ndarray, atb: np.ndarray) -> np.ndarray:
+    """b^T A^-1 b at each shape, on the column-normalised normal equations."""
+    d = np.sqrt(np.clip(np.einsum("skk->sk", ata), 0, None))
+    d[d < 1e-300] = 1.0
+    a_n = ata / d[:, :, None] / d[:, None, :]
+    b_n = atb / d
+    k = a_n.shape[1]
+    a_n = a_n + RCOND * np.eye(k)[None] * 1e2
+    try:
+        sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
+    return np.einsum("sk,sk->s", b_n, sol)
 
 
 def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = None) -> float:
@@ -216,7 +360,9 @@ def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = No
         return float(rss_over_grid(prob, fixed, cand, ctx, [v], poses, proj=proj)[0])
 
     a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
-    res = optimize.minimize_scalar(
+    from scipy.optimize import minimize_scalar  # lazy: scipy.optimize costs 0.7 s
+
+    res = minimize_scalar(
         cost, bounds=(a, b), method="bounded", options={"xatol": REFINE_XTOL * abs(b - a) + 1e-15}
     )
     return float(np.exp(res.x)) if cand.shape_log else float(res.x)

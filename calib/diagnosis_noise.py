@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 PLAUSIBLE = (0.5, 2.0)  # a typed sigma outside this ratio to the repeats is flagged
 
@@ -76,6 +75,8 @@ def noise_level(
 
 
 def chi_square_p(sum_sq: float, sigma_m: float, dof: int) -> float:
+    from scipy import stats  # lazy: scipy.stats costs about 1 s at import
+
     return float(stats.chi2.sf(sum_sq / sigma_m**2, max(dof, 1)))
 
 

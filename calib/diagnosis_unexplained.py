@@ -11,13 +11,18 @@ error the answer is "unexplained: correlated with <group>", not a wrong effect a
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 
 from calib.diagnosis_context import Context
 from calib.diagnosis_fit import Problem
 from twin.rotations import rotvec_from_matrix
 
 BANDWIDTHS = (0.15, 0.3, 0.6, 1.2, 2.5)
+
+
+def _stats():
+    from scipy import stats  # lazy: scipy.stats costs about 1 s at import
+
+    return stats
 
 
 def features(ctx: Context) -> dict[str, np.ndarray]:
@@ -49,7 +54,7 @@ def structure_detail(r: np.ndarray, keep: np.ndarray, ctx: Context) -> dict[str,
     out = {}
     for name, v in probes.items():
         if np.ptp(v) > 0 and np.ptp(size) > 0:
-            res = stats.spearmanr(size, v)
+            res = _stats().spearmanr(size, v)
             out[name] = {
                 "rho": float(np.nan_to_num(res.statistic)),
                 "p": float(np.nan_to_num(res.pvalue, nan=1.0)),
@@ -139,6 +144,6 @@ def residual_structure(
     }
     out = {}
     for name, v in probes.items():
-        rho = stats.spearmanr(size, v).statistic if np.ptp(v) > 0 else 0.0
+        rho = _stats().spearmanr(size, v).statistic if np.ptp(v) > 0 else 0.0
         out[name] = float(np.nan_to_num(rho))
     return out

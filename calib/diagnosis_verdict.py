@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from calib.diagnosis_candidates import Candidate
 from calib.diagnosis_context import Context
@@ -56,6 +55,8 @@ def improvement(before: np.ndarray, after: np.ndarray) -> tuple[float, float]:
     d = d[d != 0]
     if d.size < 5:
         return gain, 1.0
+    from scipy import stats  # lazy: scipy.stats costs about 1 s at import
+
     return gain, float(stats.wilcoxon(d, alternative="greater").pvalue)
 
 

@@ -49,6 +49,7 @@ from twin.parameters import KINDS, ParameterSet
 # the rows that do not depend on the estimator, coarse and OLS, position max and mean.
 POSITION_FACTOR = 1.5
 MATCHED_ROWS = ("coarse", "ols")
+MC_CHUNK = 2000  # Monte Carlo runs estimated at once
 
 
 def paper_match(layers: dict[str, dict[str, dict[str, float]]]) -> dict[str, Any]:
@@ -84,19 +85,22 @@ def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) 
     noise = bench.rng.normal(0.0, bench.sigma_m, size=(runs, dp_clean.size))
     shown = params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
     scale = np.diag(shown)  # SI -> mm/deg per kept parameter
-    ys = dp_clean[None, :] + noise  # every estimator's measurements, formed once
-    spread = {}
-    for label, est in (
-        ("ols", make_estimator("ols")),
-        ("liu", make_estimator("liu")),
-        ("liu_k1", make_estimator("liu", k=1.0)),
-        ("liu_paper_deg", make_estimator("liu_paper", angle_unit="deg", is_angle=problem.is_angle)),
-        ("liu_paper_rad", make_estimator("liu_paper", angle_unit="rad", is_angle=problem.is_angle)),
-    ):
-        draws = est.fit_many(problem.h, ys) * scale
-        spread[label] = float(np.sqrt(np.sum(draws.var(axis=0, ddof=1))))
-        progress.counter("estimators", len(spread), 5)
-    return spread
+    estimators = {
+        "ols": make_estimator("ols"),
+        "liu": make_estimator("liu"),
+        "liu_k1": make_estimator("liu", k=1.0),
+        "liu_paper_deg": make_estimator("liu_paper", angle_unit="deg", is_angle=problem.is_angle),
+        "liu_paper_rad": make_estimator("liu_paper", angle_unit="rad", is_angle=problem.is_angle),
+    }
+    draws = {label: np.empty((runs, len(scale))) for label in estimators}
+    # the runs in chunks: each run's estimate is its own, and the temporaries of a chunk (the
+    # estimators form several arrays of the measurements' size) stay small
+    for lo in range(0, runs, MC_CHUNK):
+        ys = dp_clean[None, :] + noise[lo : lo + MC_CHUNK]
+        for label, est in estimators.items():
+            draws[label][lo : lo + MC_CHUNK] = est.fit_many(problem.h, ys) * scale
+        progress.counter("runs", min(lo + MC_CHUNK, runs), runs)
+    return {label: float(np.sqrt(np.sum(d.var(axis=0, ddof=1)))) for label, d in draws.items()}
 
 
 def orientation_check(

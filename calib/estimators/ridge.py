@@ -16,7 +16,6 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from calib.estimators.linear import (
     LinearEstimate,
@@ -39,6 +38,8 @@ def gcv_score(s: np.ndarray, uty: np.ndarray, resid_out: float, n: int, k: float
 
 def gcv_k(prob: Scaled, ys: np.ndarray) -> np.ndarray:
     """The GCV-optimal k for each row of ys (runs, n): grid on all runs at once, then refine."""
+    from scipy.optimize import minimize_scalar  # lazy: only the GCV rule needs it
+
     lam = prob.lambdas
     grid = GCV_GRID * lam[0]
     f = lam[None, :] / (lam[None, :] + grid[:, None])  # (G, m)
