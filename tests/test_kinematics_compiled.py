@@ -42,8 +42,10 @@ def test_compiled_tree_equals_mujoco_for_every_joint_kind():
     model = _every_joint_model()
     assert set(model.jnt_type.tolist()) == {0, 1, 2, 3}  # free, ball, slide, hinge
     num = model_numbers(model)
-    body_pos, body_rot, jnt_pos, jnt_axis, jnt_unit, qpos0, site_pos, site_rot, turned = num
+    site_pos, site_rot, turned = num[-3:]
     assert turned.any() and not turned.all()
+    assert set(num[7].tolist()) == {0, 1, 2, 3}  # general, +x and -z hinges (the free: 0)
+    assert num[2].any() and not num[2].all() and num[4].any() and not num[4].all()
     ints = lambda x: np.ascontiguousarray(x, dtype=np.int64)  # noqa: E731
     xpos, xmat = np.empty((model.nbody, 3)), np.empty((model.nbody, 3, 3))
     xanchor, xaxis = np.empty((model.njnt, 3)), np.empty((model.njnt, 3))
@@ -51,8 +53,8 @@ def test_compiled_tree_equals_mujoco_for_every_joint_kind():
     for q, ref in zip(qs, _mujoco_frames(model, qs), strict=True):
         tree(
             q, ints(model.body_parentid), ints(model.body_jntadr), ints(model.body_jntnum),
-            ints(model.jnt_type), ints(model.jnt_qposadr), body_pos, body_rot, jnt_pos,
-            jnt_axis, jnt_unit, qpos0, xpos, xmat, xanchor, xaxis, np.empty((3, 3)),
+            ints(model.jnt_type), ints(model.jnt_qposadr), *num[:10], xpos, xmat, xanchor,
+            xaxis, np.empty((3, 3)),
         )  # fmt: skip
         np.testing.assert_allclose(xpos, ref["xpos"], rtol=0, atol=1e-12)
         np.testing.assert_allclose(xmat.reshape(-1, 9), ref["xmat"], rtol=0, atol=1e-12)

@@ -134,17 +134,28 @@ def _rotations(quat: np.ndarray) -> np.ndarray:
 
 
 def model_numbers(m: mujoco.MjModel) -> tuple[np.ndarray, ...]:
-    """The numbers the kernels read, in the order newton_batch unpacks them."""
+    """The numbers the kernels read, in the order newton_batch unpacks them: body offsets,
+    rotations and whether each turns, joint positions and whether each is off its body's
+    origin, joint axes (as given and unit) with their class (0-2 a coordinate axis, signed
+    by ``sign``; 3 any other), qpos0, site offsets, rotations and whether each turns."""
     ident = np.array([1.0, 0.0, 0.0, 0.0])
-    axis = np.asarray(m.jnt_axis, dtype=float)
+    axis = np.ascontiguousarray(m.jnt_axis, dtype=float)
     norm = np.linalg.norm(axis, axis=1, keepdims=True)
     unit = axis / np.where(norm > 0, norm, 1.0)
+    nonzero = axis != 0.0
+    single = (nonzero.sum(axis=1) == 1) & (np.abs(axis).max(axis=1, initial=0.0) == 1.0)
+    cls = np.where(single, np.argmax(nonzero, axis=1), 3).astype(np.int64)
+    sign = np.where(single, axis[np.arange(len(axis)), np.minimum(cls, 2)], 1.0)
     return (
         np.ascontiguousarray(m.body_pos, dtype=float),
         _rotations(np.asarray(m.body_quat, dtype=float)),
+        np.ascontiguousarray(np.any(m.body_quat != ident, axis=1)),
         np.ascontiguousarray(m.jnt_pos, dtype=float),
-        np.ascontiguousarray(axis),
+        np.ascontiguousarray(np.any(m.jnt_pos != 0.0, axis=1)),
+        axis,
         np.ascontiguousarray(unit),
+        np.ascontiguousarray(cls),
+        np.ascontiguousarray(sign, dtype=float),
         np.ascontiguousarray(m.qpos0, dtype=float),
         np.ascontiguousarray(m.site_pos, dtype=float),
         _rotations(np.asarray(m.site_quat, dtype=float)) if m.nsite else np.zeros((0, 3, 3)),
@@ -175,23 +186,37 @@ def solve_compiled(
     """Forward kinematics of the starts ``qs`` (n, nq) (actuators at their commands), in place
     on every array: qs the closed configurations, out_pos (n, S, 3) the output sites,
     out_rot (n, 3, 3) the tool's rotation, residual and iterations (n,). ``settings``: the
-    Newton's (tolerance, accept, max_iter, max_step), those of twin.kinematics."""
+    Newton's (tolerance, accept, max_iter, max_step), those of twin.kinematics.
+
+    The kernel works on arrays of this call's own, copied in and out: numba counts the
+    references to an array's buffer atomically at every view and call, and threads sharing
+    one buffer (halves of one batch, the model's numbers) would contend for its count."""
     from twin.kinematics_compiled_kernels import newton_batch  # compiles on first use
 
+    own = _own_copy
+    q = qs.copy()
+    pos, rot = np.empty(out_pos.shape), np.empty(out_rot.shape)
+    res, its = np.empty(residual.shape), np.empty(iterations.shape, dtype=np.int64)
     newton_batch(
-        qs,
-        plan.structure,
-        numbers,
-        plan.closure,
-        plan.dofs,
-        plan.motion,
-        plan.out_sites,
+        q,
+        own(plan.structure),
+        own(numbers),
+        own(plan.closure),
+        own(plan.dofs),
+        own(plan.motion),
+        plan.out_sites.copy(),
         (float(settings[0]), float(settings[1]), int(settings[2]), float(settings[3])),
-        out_pos,
-        out_rot,
-        residual,
-        iterations,
+        pos,
+        rot,
+        res,
+        its,
     )
+    qs[:], out_pos[:], out_rot[:], residual[:], iterations[:] = q, pos, rot, res, its
+
+
+def _own_copy(arrays: tuple) -> tuple:
+    """The arrays of a tuple copied (other items as they are)."""
+    return tuple(a.copy() if isinstance(a, np.ndarray) else a for a in arrays)
 
 
 @functools.cache

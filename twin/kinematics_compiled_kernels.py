@@ -54,26 +54,14 @@ def quat_to_mat(q0, q1, q2, q3, out):
 
 @nb.njit(**JIT)
 def tree(
-    q,
-    parent,
-    jnt_adr,
-    jnt_num,
-    jnt_type,
-    jnt_qposadr,
-    body_pos,
-    body_rot,
-    jnt_pos,
-    jnt_axis,
-    jnt_unit,
-    qpos0,
-    xpos,
-    xmat,
-    xanchor,
-    xaxis,
-    local,
-):
+    q, parent, jnt_adr, jnt_num, jnt_type, jnt_qposadr,
+    body_pos, body_rot, body_turned, jnt_pos, jnt_offset, jnt_axis, jnt_unit, jnt_class,
+    jnt_sign, qpos0, xpos, xmat, xanchor, xaxis, local,
+):  # fmt: skip
     """``mj_kinematics`` of one configuration q into xpos (nbody, 3), xmat (nbody, 3, 3),
-    xanchor and xaxis (njnt, 3); ``local`` a (3, 3) scratch."""
+    xanchor and xaxis (njnt, 3); ``local`` a (3, 3) scratch. As twin.kinematics_tree, a body
+    without a rotation keeps its parent's, a joint at its body's origin needs no offset, and
+    a hinge about a coordinate axis (``jnt_class`` 0-2, ``jnt_sign`` +-1) turns two columns."""
     xpos[0, :] = 0.0
     xmat[0, :, :] = 0.0
     for i in range(3):
@@ -86,12 +74,16 @@ def tree(
                 + xmat[p, i, 1] * body_pos[b, 1]
                 + xmat[p, i, 2] * body_pos[b, 2]
             )
-            for j in range(3):
-                xmat[b, i, j] = (
-                    xmat[p, i, 0] * body_rot[b, 0, j]
-                    + xmat[p, i, 1] * body_rot[b, 1, j]
-                    + xmat[p, i, 2] * body_rot[b, 2, j]
-                )
+            if body_turned[b]:
+                for j in range(3):
+                    xmat[b, i, j] = (
+                        xmat[p, i, 0] * body_rot[b, 0, j]
+                        + xmat[p, i, 1] * body_rot[b, 1, j]
+                        + xmat[p, i, 2] * body_rot[b, 2, j]
+                    )
+            else:
+                for j in range(3):
+                    xmat[b, i, j] = xmat[p, i, j]
         for jn in range(jnt_adr[b], jnt_adr[b] + jnt_num[b]):
             kind = jnt_type[jn]
             a = jnt_qposadr[jn]
@@ -102,21 +94,44 @@ def tree(
                     xaxis[jn, i] = jnt_axis[jn, i]
                 quat_to_mat(q[a + 3], q[a + 4], q[a + 5], q[a + 6], xmat[b])
                 continue
+            cls = jnt_class[jn]
             for i in range(3):
-                xanchor[jn, i] = xpos[b, i] + (
-                    xmat[b, i, 0] * jnt_pos[jn, 0]
-                    + xmat[b, i, 1] * jnt_pos[jn, 1]
-                    + xmat[b, i, 2] * jnt_pos[jn, 2]
-                )
-                xaxis[jn, i] = (
-                    xmat[b, i, 0] * jnt_axis[jn, 0]
-                    + xmat[b, i, 1] * jnt_axis[jn, 1]
-                    + xmat[b, i, 2] * jnt_axis[jn, 2]
-                )
+                if jnt_offset[jn]:
+                    xanchor[jn, i] = xpos[b, i] + (
+                        xmat[b, i, 0] * jnt_pos[jn, 0]
+                        + xmat[b, i, 1] * jnt_pos[jn, 1]
+                        + xmat[b, i, 2] * jnt_pos[jn, 2]
+                    )
+                else:
+                    xanchor[jn, i] = xpos[b, i]
+                if cls < 3:
+                    xaxis[jn, i] = jnt_sign[jn] * xmat[b, i, cls]
+                else:
+                    xaxis[jn, i] = (
+                        xmat[b, i, 0] * jnt_axis[jn, 0]
+                        + xmat[b, i, 1] * jnt_axis[jn, 1]
+                        + xmat[b, i, 2] * jnt_axis[jn, 2]
+                    )
             if kind == SLIDE:
                 d = q[a] - qpos0[a]
                 for i in range(3):
                     xpos[b, i] += xaxis[jn, i] * d
+                continue
+            if kind == HINGE and cls < 3:  # columns ca, cb turned about the axis
+                theta = jnt_sign[jn] * (q[a] - qpos0[a])
+                co, si = math.cos(theta), math.sin(theta)
+                ca, cb = (1, 2) if cls == 0 else ((2, 0) if cls == 1 else (0, 1))
+                for i in range(3):
+                    ra, rb = xmat[b, i, ca], xmat[b, i, cb]
+                    xmat[b, i, ca] = co * ra + si * rb
+                    xmat[b, i, cb] = co * rb - si * ra
+                if jnt_offset[jn]:
+                    for i in range(3):
+                        xpos[b, i] = xanchor[jn, i] - (
+                            xmat[b, i, 0] * jnt_pos[jn, 0]
+                            + xmat[b, i, 1] * jnt_pos[jn, 1]
+                            + xmat[b, i, 2] * jnt_pos[jn, 2]
+                        )
                 continue
             if kind == HINGE:  # Rodrigues about the unit axis (as twin.kinematics_tree)
                 theta = q[a] - qpos0[a]
@@ -136,12 +151,13 @@ def tree(
                 xmat[b, i, 0] = r0 * l00 + r1 * l10 + r2 * l20
                 xmat[b, i, 1] = r0 * l01 + r1 * l11 + r2 * l21
                 xmat[b, i, 2] = r0 * l02 + r1 * l12 + r2 * l22
-            for i in range(3):
-                xpos[b, i] = xanchor[jn, i] - (
-                    xmat[b, i, 0] * jnt_pos[jn, 0]
-                    + xmat[b, i, 1] * jnt_pos[jn, 1]
-                    + xmat[b, i, 2] * jnt_pos[jn, 2]
-                )
+            if jnt_offset[jn]:
+                for i in range(3):
+                    xpos[b, i] = xanchor[jn, i] - (
+                        xmat[b, i, 0] * jnt_pos[jn, 0]
+                        + xmat[b, i, 1] * jnt_pos[jn, 1]
+                        + xmat[b, i, 2] * jnt_pos[jn, 2]
+                    )
 
 
 @nb.njit(**JIT_INLINE)
@@ -433,7 +449,8 @@ def newton_batch(
     into out_rot (N, 3, 3), the largest closure residual component and the Newton iteration
     of each pose. ``settings`` = (tolerance, accept, max_iter, max_step)."""
     parent, jnt_adr, jnt_num, jnt_type, jnt_qposadr, site_body = structure
-    body_pos, body_rot, jnt_pos, jnt_axis, jnt_unit, qpos0, site_pos, site_rot, turned = numbers
+    (body_pos, body_rot, body_turned, jnt_pos, jnt_offset, jnt_axis, jnt_unit, jnt_class,
+     jnt_sign, qpos0, site_pos, site_rot, turned) = numbers  # fmt: skip
     cl_sites, cl_rows, cl_off, cl_k, cl_private, shared, moves, square = closure
     dof_kind, dof_joint, dof_body, dof_col, dof_rot = dofs
     simple_qpos, simple_rows, multi_type, multi_qpos, multi_rows = motion
@@ -459,8 +476,8 @@ def newton_batch(
         for it in range(max_iter + 1):
             tree(
                 q, parent, jnt_adr, jnt_num, jnt_type, jnt_qposadr,
-                body_pos, body_rot, jnt_pos, jnt_axis, jnt_unit, qpos0,
-                xpos, xmat, xanchor, xaxis, local,
+                body_pos, body_rot, body_turned, jnt_pos, jnt_offset, jnt_axis, jnt_unit,
+                jnt_class, jnt_sign, qpos0, xpos, xmat, xanchor, xaxis, local,
             )  # fmt: skip
             for e in range(2 * nc):  # the closure sites' frames (site_frame, inline)
                 st = cl_sites[e]
