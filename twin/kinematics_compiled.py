@@ -272,23 +272,38 @@ def implicit_term_compiled(
     parameter moves which closure site, ``affected`` (2C, n). Square closure systems only."""
     from twin.kinematics_compiled_kernels import implicit_batch  # compiles on first use
 
-    site, par = np.nonzero(affected)
+    site, par = _ints(np.nonzero(affected)[0]), _ints(np.nonzero(affected)[1])
     n_pose, m_rhs, n_par = jt.shape[2], jt.shape[1], v.shape[1]
-    out = np.empty((n_pose, m_rhs, n_par))
-    implicit_batch(
+    inputs = [
         np.ascontiguousarray(site_pos.transpose(2, 1, 0)),
         np.ascontiguousarray(axes.transpose(2, 1, 0)),
         np.ascontiguousarray(anchors.transpose(2, 1, 0)),
         np.ascontiguousarray(jt.transpose(2, 0, 1)),
         np.ascontiguousarray(v.transpose(2, 1, 0)),
         np.ascontiguousarray(w.transpose(2, 1, 0)),
-        _ints(site),
-        _ints(par),
-        plan.closure,
-        plan.dofs[4],
-        out,
-    )
+    ]
+    out = np.empty((n_pose, m_rhs, n_par))
+    workers = 1 if n_pose < IMPLICIT_PARALLEL_MIN else processors()
+    size = -(-n_pose // workers)
+    chunks = [slice(i, min(n_pose, i + size)) for i in range(0, n_pose, size)]
+
+    def work(sl: slice) -> None:  # arrays of its own (see solve_compiled)
+        part = np.empty((sl.stop - sl.start, m_rhs, n_par))
+        implicit_batch(
+            *[a[sl].copy() for a in inputs],
+            site.copy(),
+            par.copy(),
+            _own_copy(plan.closure),
+            plan.dofs[4].copy(),
+            part,
+        )
+        out[sl] = part
+
+    run_chunks(work, chunks)
     return out
+
+
+IMPLICIT_PARALLEL_MIN = 64  # fewer poses than this: one thread
 
 
 WARM_UP_MODEL = """
