@@ -178,3 +178,29 @@ def test_a_pose_that_cannot_close_is_named(machines):
         messages.append(str(err.value))
     assert "pose 17" in messages[0] and "1 of 50" in messages[0]
     assert messages[0].split("residual")[0] == messages[1].split("residual")[0]
+
+
+@pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher"])
+def test_second_order_predictor_starts_closer_and_changes_no_solution(machines, name, monkeypatch):
+    import twin.kinematics_fast as kf
+
+    mech, commands = machines[name]
+    fk = fast_kinematics(mech)
+    home = mech.home_qpos
+    # difference_soa inverts integrate_soa (simple, ball and free joints)
+    step = np.random.default_rng(9).normal(0.0, 0.05, (len(mech.free_dofs()), 20))
+    q = np.repeat(home[:, None], 20, axis=1)
+    moved = q.copy()
+    kf.integrate_soa(fk, moved, step)
+    np.testing.assert_allclose(kf.difference_soa(fk, q, moved), step, rtol=0, atol=1e-12)
+    # the start of each order against the closed solutions
+    exact = forward_batch(mech, commands, start=home)
+    starts = {}
+    for order, minimum in (("first", 10**9), ("second", 1)):
+        monkeypatch.setattr(kf, "CURVATURE_MIN", minimum)
+        q0 = np.repeat(home[:, None], len(commands), axis=1)
+        kf.predict_start(fk, q0, commands)
+        starts[order] = np.abs(kf.difference_soa(fk, q0, exact.qpos.T)).max(axis=0)
+        sol = forward_batch(mech, commands)
+        np.testing.assert_allclose(sol.targets, exact.targets, rtol=0, atol=1e-12)
+    assert np.median(starts["second"]) < 0.5 * np.median(starts["first"])
