@@ -1,7 +1,7 @@
 """Speed benchmark (``make bench``): results/bench.json and results/bench.md.
 
 * forward kinematics of the hexapod, the polisher and the serial arm: single pose and batched
-  (twin.kinematics_batch.forward_batch, 10,000 poses, best of 2, on the compiled kernels and
+  (twin.kinematics_batch.forward_batch, 10,000 poses, best of 5, on the compiled kernels and
   on the numpy path alternately), poses per second (bench.fk);
 * identification on each machine (bench.machines): ours (calib.identify, robust by default and
   plain least squares) against scipy.optimize.least_squares with a finite-difference Jacobian

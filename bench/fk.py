@@ -1,5 +1,5 @@
 """Forward kinematics rates: single pose (twin.kinematics.forward) and batched
-(twin.kinematics_batch.forward_batch, 10,000 poses, best of 2): the compiled kernels (the
+(twin.kinematics_batch.forward_batch, 10,000 poses, best of 5): the compiled kernels (the
 default) and the numpy path, timed alternately in the same run so that their ratio holds on a
 loaded machine."""
 
@@ -28,7 +28,8 @@ def fk_rates(truth: Mechanism, cmds: np.ndarray, n_single: int = 200) -> dict:
     t_single = best_time(lambda: [forward(truth, c) for c in cmds[:n_single]], 1) / n_single
     big = np.tile(cmds, (10000 // len(cmds) + 1, 1))[:10000]
     t_batch = t_numpy = np.inf
-    for _ in range(2):  # alternately: both see the same load
+    for _ in range(5):  # alternately, so both see the same load; best of 5 (the machine's
+        # speed drifts by a quarter from one second to the next)
         t_batch = min(t_batch, best_time(lambda: forward_batch(truth, big), 1) / len(big))
         t_numpy = min(
             t_numpy, best_time(lambda: forward_batch(truth, big, compiled=False), 1) / len(big)
