@@ -5,6 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from twin.kinematics_tree import dofs_moving_sites
 from twin.mechanism import Mechanism
 
 FREE = int(mujoco.mjtJoint.mjJNT_FREE)
@@ -38,17 +39,7 @@ class DofAxes:
                 self.kind[d], self.column[d], self.is_rot[d] = 2, k, True
             else:
                 self.is_rot[d] = jt == int(mujoco.mjtJoint.mjJNT_HINGE)
-        # mask[s, d]: dof d moves site s (its body is an ancestor-or-self of the site's body)
-        parent = model.body_parentid
-        self.mask = np.zeros((len(sites), nv), dtype=bool)
-        for i, s in enumerate(sites):
-            b, chain = int(model.site_bodyid[s]), set()
-            while True:
-                chain.add(b)
-                if b == 0:
-                    break
-                b = int(parent[b])
-            self.mask[i] = np.isin(self.body, list(chain))
+        self.mask = dofs_moving_sites(model, sites, np.arange(nv))  # [s, d]: d moves s
         self.pairs = np.nonzero(self.mask & free_mask[None, :])
         self.scatter: list | None = None
 

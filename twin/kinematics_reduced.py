@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.kinematics_tree import FREE, HINGE, TreeFrames, as_index
+from twin.kinematics_tree import FREE, HINGE, TreeFrames, as_index, dofs_moving_sites
 from twin.mechanism import Mechanism
 from twin.small_systems import (  # eliminate_static: the tests replace it here
     back_substitute,
@@ -82,7 +82,7 @@ class ClosureStructure:
         self.row_offset = np.cumsum([0] + [c.size for c in mech.closures])[:-1]
         self.weld = np.array([c.kind == "weld" for c in mech.closures], dtype=bool)
         self._read_dofs(m)
-        moves = self._moves(m, self.sites)  # (2 C, n_free)
+        moves = dofs_moving_sites(m, self.sites, self.free)  # (2 C, n_free)
         self.site_moves = moves
         entries = []  # (closure, dof, ma, mb, rot)
         touch = np.zeros((nc, len(self.free)), dtype=bool)
@@ -118,19 +118,6 @@ class ClosureStructure:
                 self.dof_rot[i] = jt == HINGE
         self.simple = self.dof_kind == AXIS_JOINT
         self.simple_joint = as_index(self.dof_joint[self.simple])
-
-    def _moves(self, m: mujoco.MjModel, sites: np.ndarray) -> np.ndarray:
-        """moves[s, f]: free dof f moves site s (its body is an ancestor-or-self)."""
-        out = np.zeros((len(sites), len(self.free)), dtype=bool)
-        for i, s in enumerate(sites):
-            b, chain = int(m.site_bodyid[s]), set()
-            while True:
-                chain.add(b)
-                if b == 0:
-                    break
-                b = int(m.body_parentid[b])
-            out[i] = np.isin(self.dof_body, list(chain))
-        return out
 
     def _partition(self, mech: Mechanism, touch: np.ndarray) -> None:
         """Private columns per closure, shared columns, and groups of like closures."""

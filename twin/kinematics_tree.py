@@ -48,6 +48,22 @@ def as_index(ix: np.ndarray) -> np.ndarray | slice:
     return ix
 
 
+def dofs_moving_sites(model: mujoco.MjModel, sites, dofs) -> np.ndarray:
+    """(S, len(dofs)) bool: the dof moves the site (its body is an ancestor-or-self of the
+    site's body)."""
+    dof_body = model.dof_bodyid[np.asarray(dofs, dtype=int)]
+    out = np.zeros((len(sites), len(dof_body)), dtype=bool)
+    for i, s in enumerate(sites):
+        b, chain = int(model.site_bodyid[s]), set()
+        while True:
+            chain.add(b)
+            if b == 0:
+                break
+            b = int(model.body_parentid[b])
+        out[i] = np.isin(dof_body, list(chain))
+    return out
+
+
 @dataclass(frozen=True)
 class JointGroup:
     """Joints of one kind in one slot of one depth level of the tree."""

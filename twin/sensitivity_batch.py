@@ -24,7 +24,7 @@ from twin.kinematics_fast import (
     one_blas_thread,
 )
 from twin.kinematics_reduced import ClosureStructure, cross_soa
-from twin.kinematics_tree import TreeFrames, tree_frames
+from twin.kinematics_tree import TreeFrames, dofs_moving_sites, tree_frames
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
 
@@ -47,24 +47,9 @@ class JacobianPlan:
         return cls(
             structure=kinematic_structure(mech),
             free=free,
-            target_moves=_dofs_moving(mech.model, mech.target_sites, free),
-            tool_moves=_dofs_moving(mech.model, [mech.tool_site], free),
+            target_moves=dofs_moving_sites(mech.model, mech.target_sites, free),
+            tool_moves=dofs_moving_sites(mech.model, [mech.tool_site], free),
         )
-
-
-def _dofs_moving(model, sites, dofs: np.ndarray) -> np.ndarray:
-    """(S, len(dofs)) bool: the dof moves the site (its body is an ancestor-or-self)."""
-    parent = model.body_parentid
-    moves = np.zeros((len(sites), len(dofs)), dtype=bool)
-    for i, s in enumerate(sites):
-        b, chain = int(model.site_bodyid[s]), set()
-        while True:
-            chain.add(b)
-            if b == 0:
-                break
-            b = int(parent[b])
-        moves[i] = np.isin(model.dof_bodyid[dofs], list(chain))
-    return moves
 
 
 @dataclass(frozen=True)
