@@ -125,33 +125,26 @@ def tree(
                     ra, rb = xmat[b, i, ca], xmat[b, i, cb]
                     xmat[b, i, ca] = co * ra + si * rb
                     xmat[b, i, cb] = co * rb - si * ra
-                if jnt_offset[jn]:
-                    for i in range(3):
-                        xpos[b, i] = xanchor[jn, i] - (
-                            xmat[b, i, 0] * jnt_pos[jn, 0]
-                            + xmat[b, i, 1] * jnt_pos[jn, 1]
-                            + xmat[b, i, 2] * jnt_pos[jn, 2]
-                        )
-                continue
-            if kind == HINGE:  # Rodrigues about the unit axis (as twin.kinematics_tree)
-                theta = q[a] - qpos0[a]
-                co, si = math.cos(theta), math.sin(theta)
-                t = 1.0 - co
-                x, y, z = jnt_unit[jn, 0], jnt_unit[jn, 1], jnt_unit[jn, 2]
-                l00, l01, l02 = co + x * x * t, x * y * t - z * si, x * z * t + y * si
-                l10, l11, l12 = y * x * t + z * si, co + y * y * t, y * z * t - x * si
-                l20, l21, l22 = z * x * t - y * si, z * y * t + x * si, co + z * z * t
             else:
-                quat_to_mat(q[a], q[a + 1], q[a + 2], q[a + 3], local)
-                l00, l01, l02 = local[0, 0], local[0, 1], local[0, 2]
-                l10, l11, l12 = local[1, 0], local[1, 1], local[1, 2]
-                l20, l21, l22 = local[2, 0], local[2, 1], local[2, 2]
-            for i in range(3):
-                r0, r1, r2 = xmat[b, i, 0], xmat[b, i, 1], xmat[b, i, 2]
-                xmat[b, i, 0] = r0 * l00 + r1 * l10 + r2 * l20
-                xmat[b, i, 1] = r0 * l01 + r1 * l11 + r2 * l21
-                xmat[b, i, 2] = r0 * l02 + r1 * l12 + r2 * l22
-            if jnt_offset[jn]:
+                if kind == HINGE:  # Rodrigues about the unit axis (as twin.kinematics_tree)
+                    theta = q[a] - qpos0[a]
+                    co, si = math.cos(theta), math.sin(theta)
+                    t = 1.0 - co
+                    x, y, z = jnt_unit[jn, 0], jnt_unit[jn, 1], jnt_unit[jn, 2]
+                    l00, l01, l02 = co + x * x * t, x * y * t - z * si, x * z * t + y * si
+                    l10, l11, l12 = y * x * t + z * si, co + y * y * t, y * z * t - x * si
+                    l20, l21, l22 = z * x * t - y * si, z * y * t + x * si, co + z * z * t
+                else:
+                    quat_to_mat(q[a], q[a + 1], q[a + 2], q[a + 3], local)
+                    l00, l01, l02 = local[0, 0], local[0, 1], local[0, 2]
+                    l10, l11, l12 = local[1, 0], local[1, 1], local[1, 2]
+                    l20, l21, l22 = local[2, 0], local[2, 1], local[2, 2]
+                for i in range(3):
+                    r0, r1, r2 = xmat[b, i, 0], xmat[b, i, 1], xmat[b, i, 2]
+                    xmat[b, i, 0] = r0 * l00 + r1 * l10 + r2 * l20
+                    xmat[b, i, 1] = r0 * l01 + r1 * l11 + r2 * l21
+                    xmat[b, i, 2] = r0 * l02 + r1 * l12 + r2 * l22
+            if jnt_offset[jn]:  # the body's origin from the joint's anchor, turned
                 for i in range(3):
                     xpos[b, i] = xanchor[jn, i] - (
                         xmat[b, i, 0] * jnt_pos[jn, 0]
@@ -161,8 +154,8 @@ def tree(
 
 
 @nb.njit(**JIT_INLINE)
-def site_frame(s, site_body, site_pos, site_rot, site_turned, xpos, xmat, pos, rot):
-    """World position (3,) and rotation (3, 3) of site s."""
+def site_position(s, site_body, site_pos, xpos, xmat, pos):
+    """World position (3,) of site s."""
     b = site_body[s]
     for i in range(3):
         pos[i] = xpos[b, i] + (
@@ -170,6 +163,13 @@ def site_frame(s, site_body, site_pos, site_rot, site_turned, xpos, xmat, pos, r
             + xmat[b, i, 1] * site_pos[s, 1]
             + xmat[b, i, 2] * site_pos[s, 2]
         )
+
+
+@nb.njit(**JIT_INLINE)
+def site_frame(s, site_body, site_pos, site_rot, site_turned, xpos, xmat, pos, rot):
+    """World position (3,) and rotation (3, 3) of site s."""
+    site_position(s, site_body, site_pos, xpos, xmat, pos)
+    b = site_body[s]
     if site_turned[s]:
         for i in range(3):
             for j in range(3):
@@ -469,7 +469,6 @@ def newton_batch(
     v = np.empty(max(6, cl_rows.sum(), kmax + s + 1))
     xs, step = np.empty(max(1, s)), np.empty(max(1, nf))
     axes, anchors = np.empty((max(1, nf), 3)), np.empty((max(1, nf), 3))
-    pos, rot = np.empty(3), np.empty((3, 3))
     for n in range(qs.shape[0]):
         q = qs[n]
         best, stall = np.inf, 0
@@ -479,17 +478,12 @@ def newton_batch(
                 body_pos, body_rot, body_turned, jnt_pos, jnt_offset, jnt_axis, jnt_unit,
                 jnt_class, jnt_sign, qpos0, xpos, xmat, xanchor, xaxis, local,
             )  # fmt: skip
-            for e in range(2 * nc):  # the closure sites' frames (site_frame, inline)
-                st = cl_sites[e]
-                bd = site_body[st]
-                for i in range(3):
-                    sp[e, i] = xpos[bd, i] + (
-                        xmat[bd, i, 0] * site_pos[st, 0]
-                        + xmat[bd, i, 1] * site_pos[st, 1]
-                        + xmat[bd, i, 2] * site_pos[st, 2]
-                    )
+            for e in range(2 * nc):  # the closure sites' frames; rotations for welds only
                 if has_weld:
-                    site_frame(st, site_body, site_pos, site_rot, turned, xpos, xmat, pos, srot[e])
+                    site_frame(cl_sites[e], site_body, site_pos, site_rot, turned, xpos, xmat,
+                               sp[e], srot[e])  # fmt: skip
+                else:
+                    site_position(cl_sites[e], site_body, site_pos, xpos, xmat, sp[e])
             err, bad = 0.0, False
             for c in range(nc):
                 o = cl_off[c]
@@ -510,11 +504,11 @@ def newton_batch(
             best = min(best, err)
             done = err < tolerance or (stall >= 3 and best < accept)
             if done or not math.isfinite(err) or it == max_iter:
-                for e in range(out_sites.size):
-                    site_frame(out_sites[e], site_body, site_pos, site_rot, turned, xpos, xmat,
-                               out_pos[n, e], rot)  # fmt: skip
-                    if e == 0:
-                        out_rot[n] = rot
+                # the tool's frame, then the targets' positions
+                site_frame(out_sites[0], site_body, site_pos, site_rot, turned, xpos, xmat,
+                           out_pos[n, 0], out_rot[n])  # fmt: skip
+                for e in range(1, out_sites.size):
+                    site_position(out_sites[e], site_body, site_pos, xpos, xmat, out_pos[n, e])
                 iterations[n] = it
                 break
             dof_axes(xmat, xanchor, xaxis, dof_kind, dof_joint, dof_body, dof_col, axes, anchors)
