@@ -30,6 +30,7 @@ from twin.kinematics_compiled import (
     CompiledPlan,
     compiled_numbers,
     compiled_plan,
+    pose_chunks,
     processors,
     run_chunks,
     solve_compiled,
@@ -136,8 +137,7 @@ def forward_batch(
     workers = 1 if n < PARALLEL_MIN else (nthread if nthread > 0 else (os.cpu_count() or 1))
     count = -(-n // _chunk_limit(fk))  # chunks of at most that many, as many per worker
     count = -(-count // workers) * workers
-    size = -(-n // count)
-    chunks = [slice(i, min(n, i + size)) for i in range(0, n, size)]
+    chunks = pose_chunks(n, count)
     workers = max(1, min(len(chunks), workers))
 
     def work(k: int) -> int:
@@ -189,9 +189,7 @@ def _forward_compiled(
     out_rot = np.empty((n, 3, 3))
     residual = np.empty(n)
     iterations = np.zeros(n, dtype=np.int64)
-    workers = 1 if n < COMPILED_PARALLEL_MIN else (nthread or processors())
-    size = -(-n // workers)
-    chunks = [slice(i, min(n, i + size)) for i in range(0, n, size)]
+    chunks = pose_chunks(n, 1 if n < COMPILED_PARALLEL_MIN else (nthread or processors()))
 
     def work(sl: slice) -> None:
         solve_compiled(plan, numbers, q[sl], out_pos[sl], out_rot[sl], residual[sl],

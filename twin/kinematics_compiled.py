@@ -243,6 +243,12 @@ def _shared_pool(workers: int) -> ThreadPoolExecutor:
         return _pool[1]
 
 
+def pose_chunks(n: int, workers: int) -> list[slice]:
+    """``n`` poses in at most ``workers`` contiguous chunks of (nearly) equal size."""
+    size = -(-n // max(1, workers))
+    return [slice(i, min(n, i + size)) for i in range(0, n, size)]
+
+
 def run_chunks(work: Callable[[slice], None], chunks: Sequence[slice]) -> None:
     """``work(chunk)`` for every chunk, side by side on the kept pool (the kernels release the
     GIL); in the calling thread when there is one chunk or the caller is itself a pool
@@ -272,7 +278,7 @@ def implicit_term_compiled(
     parameter moves which closure site, ``affected`` (2C, n). Square closure systems only."""
     from twin.kinematics_compiled_kernels import implicit_batch  # compiles on first use
 
-    site, par = _ints(np.nonzero(affected)[0]), _ints(np.nonzero(affected)[1])
+    site, par = (_ints(ix) for ix in np.nonzero(affected))
     n_pose, m_rhs, n_par = jt.shape[2], jt.shape[1], v.shape[1]
     inputs = [
         np.ascontiguousarray(site_pos.transpose(2, 1, 0)),
@@ -283,9 +289,7 @@ def implicit_term_compiled(
         np.ascontiguousarray(w.transpose(2, 1, 0)),
     ]
     out = np.empty((n_pose, m_rhs, n_par))
-    workers = 1 if n_pose < IMPLICIT_PARALLEL_MIN else processors()
-    size = -(-n_pose // workers)
-    chunks = [slice(i, min(n_pose, i + size)) for i in range(0, n_pose, size)]
+    chunks = pose_chunks(n_pose, 1 if n_pose < IMPLICIT_PARALLEL_MIN else processors())
 
     def work(sl: slice) -> None:  # arrays of its own (see solve_compiled)
         part = np.empty((sl.stop - sl.start, m_rhs, n_par))
