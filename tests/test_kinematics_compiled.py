@@ -11,11 +11,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import mujoco
 import numpy as np
 import pytest
+from test_kinematics_fast import MACHINES, machines_with_commands
 
 from twin.exceptions import ClosureError
 from twin.kinematics import forward
@@ -24,10 +23,6 @@ from twin.kinematics_compiled import compiled_plan, model_numbers
 from twin.kinematics_compiled_kernels import site_frame, tree
 from twin.kinematics_fast import fast_kinematics
 from twin.mechanism import Mechanism
-from twin.workspace import random_poses
-
-ROOT = Path(__file__).resolve().parent.parent
-MACHINES = ("hexapod_rrrprr", "polisher", "arm6r")
 
 
 def _every_joint_model() -> mujoco.MjModel:
@@ -69,17 +64,7 @@ def test_compiled_tree_equals_mujoco_for_every_joint_kind():
 
 @pytest.fixture(scope="module")
 def machines():
-    out = {}
-    for name in MACHINES:
-        mech = Mechanism.from_xml(ROOT / f"models/{name}.xml")
-        rng = np.random.default_rng(7)
-        if mech.is_serial:
-            lo, hi = mech.actuator_range.T
-            commands = rng.uniform(0.8 * lo, 0.8 * hi, (300, mech.n_actuators))
-        else:
-            commands = random_poses(mech, 300, rng)[1]
-        out[name] = (mech, commands)
-    return out
+    return machines_with_commands(300, 7)
 
 
 @pytest.mark.parametrize("name", MACHINES)

@@ -145,19 +145,25 @@ def test_tree_equals_mujoco_for_every_joint_kind():
     _assert_tree_equals_mujoco(model, _random_configurations(model, 12, 2))
 
 
-@pytest.fixture(scope="module")
-def machines():
+def machines_with_commands(n: int, seed: int) -> dict[str, tuple[Mechanism, np.ndarray]]:
+    """Each machine of MACHINES with n commands: random reachable poses of a parallel one,
+    uniform over 80 % of each range for a serial one."""
     out = {}
     for name in MACHINES:
         mech = Mechanism.from_xml(ROOT / f"models/{name}.xml")
-        rng = np.random.default_rng(3)
+        rng = np.random.default_rng(seed)
         if mech.is_serial:
             lo, hi = mech.actuator_range.T
-            commands = rng.uniform(0.8 * lo, 0.8 * hi, (40, mech.n_actuators))
+            commands = rng.uniform(0.8 * lo, 0.8 * hi, (n, mech.n_actuators))
         else:
-            commands = random_poses(mech, 40, rng)[1]
+            commands = random_poses(mech, n, rng)[1]
         out[name] = (mech, commands)
     return out
+
+
+@pytest.fixture(scope="module")
+def machines():
+    return machines_with_commands(40, 3)
 
 
 def _assert_batch_equals_single(mech: Mechanism, commands: np.ndarray, **kwargs) -> None:
