@@ -172,6 +172,8 @@ class FastKinematics:
         self._predictor: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._numbers_key: bytes | None = None
         self._numbers: TreeNumbers | None = None
+        self._curvature_key: bytes | None = None  # see curvature()
+        self._curvature: np.ndarray | None = None
 
     def numbers(self) -> TreeNumbers:
         """The model's numbers for the tree, read again whenever they changed."""
@@ -304,8 +306,8 @@ def curvature(fk: FastKinematics) -> np.ndarray | None:
     pred = fk.predictor()
     if pred is None:
         return None
-    if fk.__dict__.get("_curvature_key") == fk._predictor_key:
-        return fk.__dict__["_curvature"]
+    if fk._curvature_key == fk._predictor_key:
+        return fk._curvature
     from twin.kinematics_batch import forward_batch  # (it calls this module)
 
     home, home_cmd, _ = pred
@@ -331,7 +333,7 @@ def curvature(fk: FastKinematics) -> np.ndarray | None:
         out = np.zeros((d.shape[0], a, a))
         for k, (i, j) in enumerate(pairs):
             out[:, i, j] = out[:, j, i] = second[:, k]
-    fk.__dict__["_curvature"], fk.__dict__["_curvature_key"] = out, fk._predictor_key
+    fk._curvature, fk._curvature_key = out, fk._predictor_key
     return out
 
 
