@@ -37,6 +37,31 @@ def test_batch_equals_per_pose(name):
     assert np.abs(per_pose).max() > 0.1  # not a vacuous comparison
 
 
+@pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher", "arm6r_3targets"])
+def test_compiled_kernel_equals_numpy_path(name, monkeypatch):
+    """The compiled kernel (frames, screws, explicit and implicit terms pose by pose) and
+    the numpy path (arrays over poses) give one Jacobian to round-off."""
+    from twin import sensitivity_batch
+
+    nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
+    params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
+    rng = np.random.default_rng(5)
+    values = rng.uniform(-2e-3, 2e-3, len(params))
+    mech = nominal.with_model(params.inject(nominal.model, values))
+    if nominal.is_serial:
+        lo, hi = nominal.actuator_range.T
+        commands = rng.uniform(0.8 * lo, 0.8 * hi, (70, nominal.n_actuators))
+    else:
+        _, commands = random_poses(nominal, 70, rng)
+    qpos = forward_batch(mech, commands).qpos
+    compiled = target_jacobian_batch(mech, params, values, qpos)
+    monkeypatch.setattr(sensitivity_batch, "COMPILED", False)
+    numpy_path = target_jacobian_batch(mech, params, values, qpos)
+    scale = np.abs(numpy_path).max()
+    assert scale > 0.1
+    np.testing.assert_allclose(compiled, numpy_path, rtol=0, atol=1e-13 * scale)
+
+
 def test_least_squares_closure_batch_equals_per_pose():
     """A closure with more equations than free dofs (a planar four-bar closed by a spherical
     connect): the batched Jacobian's least-squares path."""

@@ -68,10 +68,18 @@ def test_actuator_joints_equal_per_pose(name):
 
 
 def test_chunks_join_in_pose_order(monkeypatch):
+    from twin import sensitivity_compiled
+
     _, params, values, mech, qpos = _machine("hexapod_rrrprr", 10, 3)
     whole = tool_twist_jacobian_batch(mech, params, values, qpos)
+    # the compiled kernel's poses on three threads: every bit the same
+    monkeypatch.setattr(sensitivity_compiled, "PARALLEL_MIN", 1)
+    monkeypatch.setattr(sensitivity_compiled, "processors", lambda: 3)
+    np.testing.assert_array_equal(tool_twist_jacobian_batch(mech, params, values, qpos), whole)
+    # the numpy path's chunks of poses: the same to round-off (a chunk of one pose may take
+    # another einsum path)
+    monkeypatch.setattr(sensitivity_batch, "COMPILED", False)
     monkeypatch.setattr(sensitivity_batch, "CHUNK", 3)
-    # the same to round-off (a chunk of one pose may take another einsum path)
     _assert_equal(tool_twist_jacobian_batch(mech, params, values, qpos), whole)
     assert tool_twist_jacobian_batch(mech, params, values, qpos[:0]).shape == (0, 6, len(params))
 

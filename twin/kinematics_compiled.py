@@ -1,14 +1,13 @@
 """The compiled kernels' side in Python: the arrays they read, built from the MJCF.
 
-twin.kinematics_batch calls :func:`solve_compiled` (forward kinematics) and
-twin.sensitivity_batch :func:`implicit_term_compiled` (the identification Jacobian's adjoint
-solve and contraction) for every machine whose closure system the kernels handle (all but an
-under-determined reduced system, and for the Jacobian an over-determined one: those go
-through the numpy path). The structure arrays (tree, closures, elimination columns, joint
-motions) depend only on the machine's structure and are kept with its
-:class:`~twin.kinematics_fast.KinematicStructure`; the numbers (body and joint frames, site
-offsets) are read from the model at every call, so an edited model (an injected error, an
-effect) is followed exactly as by ``mj_kinematics``.
+twin.kinematics_batch calls :func:`solve_compiled` (forward kinematics), and
+twin.sensitivity_compiled the identification Jacobian's kernel, for every machine whose
+closure system the kernels handle (all but an under-determined reduced system, and for the
+Jacobian an over-determined one: those go through the numpy path). The structure arrays
+(tree, closures, elimination columns, joint motions) depend only on the machine's
+structure and are kept with its :class:`~twin.kinematics_fast.KinematicStructure`; the
+numbers (body and joint frames, site offsets) are read from the model at every call, so an
+edited model (an injected error, an effect) is followed exactly as by ``mj_kinematics``.
 """
 
 from __future__ import annotations
@@ -193,7 +192,7 @@ def solve_compiled(
     one buffer (halves of one batch, the model's numbers) would contend for its count."""
     from twin.kinematics_compiled_kernels import newton_batch  # compiles on first use
 
-    own = _own_copy
+    own = own_copy
     q = qs.copy()
     pos, rot = np.empty(out_pos.shape), np.empty(out_rot.shape)
     res, its = np.empty(residual.shape), np.empty(iterations.shape, dtype=np.int64)
@@ -214,7 +213,7 @@ def solve_compiled(
     qs[:], out_pos[:], out_rot[:], residual[:], iterations[:] = q, pos, rot, res, its
 
 
-def _own_copy(arrays: tuple) -> tuple:
+def own_copy(arrays: tuple) -> tuple:
     """The arrays of a tuple copied (other items as they are)."""
     return tuple(a.copy() if isinstance(a, np.ndarray) else a for a in arrays)
 
@@ -261,55 +260,6 @@ def run_chunks(work: Callable[[slice], None], chunks: Sequence[slice]) -> None:
         f.result()
 
 
-def implicit_term_compiled(
-    plan: CompiledPlan,
-    site_pos: np.ndarray,
-    axes: np.ndarray,
-    anchors: np.ndarray,
-    jt: np.ndarray,
-    v: np.ndarray,
-    w: np.ndarray,
-    affected: np.ndarray,
-) -> np.ndarray:
-    """The identification Jacobian's implicit term ``z^T c_pi`` (N, m, n) on the compiled
-    kernel (twin.kinematics_compiled_kernels.implicit_batch), from the numpy path's arrays:
-    the closure sites' positions (3, 2C, N), the free dofs' axes and anchors (3, n_free, N),
-    the outputs' motion ``jt`` (n_free, m, N), the screws ``v``, ``w`` (3, n, N) and which
-    parameter moves which closure site, ``affected`` (2C, n). Square closure systems only."""
-    from twin.kinematics_compiled_kernels import implicit_batch  # compiles on first use
-
-    site, par = (_ints(ix) for ix in np.nonzero(affected))
-    n_pose, m_rhs, n_par = jt.shape[2], jt.shape[1], v.shape[1]
-    inputs = [
-        np.ascontiguousarray(site_pos.transpose(2, 1, 0)),
-        np.ascontiguousarray(axes.transpose(2, 1, 0)),
-        np.ascontiguousarray(anchors.transpose(2, 1, 0)),
-        np.ascontiguousarray(jt.transpose(2, 0, 1)),
-        np.ascontiguousarray(v.transpose(2, 1, 0)),
-        np.ascontiguousarray(w.transpose(2, 1, 0)),
-    ]
-    out = np.empty((n_pose, m_rhs, n_par))
-    chunks = pose_chunks(n_pose, 1 if n_pose < IMPLICIT_PARALLEL_MIN else processors())
-
-    def work(sl: slice) -> None:  # arrays of its own (see solve_compiled)
-        part = np.empty((sl.stop - sl.start, m_rhs, n_par))
-        implicit_batch(
-            *[a[sl].copy() for a in inputs],
-            site.copy(),
-            par.copy(),
-            _own_copy(plan.closure),
-            plan.dofs[4].copy(),
-            part,
-        )
-        out[sl] = part
-
-    run_chunks(work, chunks)
-    return out
-
-
-IMPLICIT_PARALLEL_MIN = 64  # fewer poses than this: one thread
-
-
 WARM_UP_MODEL = """
 <mujoco>
   <worldbody>
@@ -331,18 +281,18 @@ WARM_UP_MODEL = """
 
 
 def warm_up() -> None:
-    """Compile the kernels (forward kinematics, the identification Jacobian's implicit term)
-    into numba's cache now (``make setup`` calls this: the first compilation takes tens of
-    seconds, which a test run or a scenario should not pay)."""
+    """Compile the kernels (forward kinematics, the identification Jacobian) into numba's
+    cache now (``make setup`` calls this: the first compilation takes tens of seconds, which
+    a test run or a scenario should not pay)."""
     from twin.kinematics_batch import forward_batch
     from twin.mechanism import Mechanism
+    from twin.parameters import Parameter, ParameterSet
+    from twin.sensitivity_batch import target_jacobian_batch
 
     mech = Mechanism.from_xml_string(WARM_UP_MODEL)
-    forward_batch(mech, np.array([[0.1]]))
-    plan = compiled_plan(FastKinematics(mech))
-    one = np.ones((3, 6, 1))  # the identification Jacobian's kernel: any numbers will do
-    pos, screw = np.ones((3, 2, 1)), np.ones((3, 1, 1))
-    implicit_term_compiled(plan, pos, one, one, one, screw, screw, np.ones((2, 1), bool))
+    solution = forward_batch(mech, np.array([[0.1]]))
+    params = ParameterSet([Parameter("tip_x", "site_pos", "tip", (1.0, 0.0, 0.0))], mech.model)
+    target_jacobian_batch(mech, params, np.zeros(1), solution.qpos)
 
 
 if __name__ == "__main__":

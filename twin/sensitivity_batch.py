@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.kinematics_adjoint import adjoint_solve
-from twin.kinematics_compiled import compiled_plan, implicit_term_compiled
+from twin.kinematics_compiled import compiled_plan
 from twin.kinematics_fast import (
     KinematicStructure,
     fast_kinematics,
@@ -27,8 +27,9 @@ from twin.kinematics_reduced import ClosureStructure, cross_soa
 from twin.kinematics_tree import TreeFrames, dofs_moving_sites, tree_frames
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
+from twin.sensitivity_compiled import jacobian_compiled
 
-COMPILED = True  # the implicit term on the compiled kernel where it covers the machine
+COMPILED = True  # the compiled kernel (twin.sensitivity_compiled) where it covers the machine
 CHUNK = 256  # poses per pass: bounds the (poses x sites x parameters) arrays
 
 
@@ -155,12 +156,6 @@ def _chunk(
         return np.einsum("fmn,fkn->nmk", jt, dq) + y
     # jt dq = -jt J^-1 c_pi = -(J^-T jt^T)^T c_pi: one adjoint solve with a right-hand
     # side per output row and pose instead of one with a column per parameter
-    plan = compiled_plan(fk) if COMPILED else None
-    if plan is not None:  # the adjoint solve and the contraction compiled, pose by pose
-        implicit = implicit_term_compiled(
-            plan, site_pos[:, : 2 * nc], axes, anchors, jt, vn, wn, affected[: 2 * nc]
-        )
-        return y - implicit
     z = adjoint_solve(cs, frames, site_pos[:, : 2 * nc], jt)  # (n_closure, m, N)
     return y - _implicit_term(cs, z, vn, wn, site_pos[:, : 2 * nc], affected[: 2 * nc])
 
@@ -237,6 +232,10 @@ def _batched(
     qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
     if not len(qpos):
         return np.zeros((0, len(out.sites) * out.rows, len(params)))
+    fk = fast_kinematics(mech)
+    plan = compiled_plan(fk) if COMPILED else None
+    if plan is not None and (fk.closure is None or fk.closure.square):  # pose by pose
+        return jacobian_compiled(fk, plan, params, values, qpos, out.sites, out.moves, out.angular)
     with one_blas_thread():
         parts = [
             _chunk(mech, params, values, qpos[i : i + CHUNK], out)
