@@ -108,6 +108,8 @@ def analyse(jac: np.ndarray, names: tuple[str, ...] | list[str]) -> Identifiabil
     if n != len(names):
         raise ValueError(f"Jacobian has {n} columns but {len(names)} names were given")
     scaled, _, zero = scaled_jacobian(jac)
+    if m > n:  # the same columns' geometry in n rows: R of scaled = QR, Q orthonormal
+        scaled = np.linalg.qr(scaled, mode="r")
     s = np.linalg.svd(scaled, compute_uv=False)
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
     order = pivoted_qr_order(scaled, rank)
