@@ -13,7 +13,7 @@ import numpy as np
 
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameters import ParameterSet
+from twin.parameters import KINDS, ParameterSet
 from twin.sensitivity_batch import JacobianPlan, target_jacobian_batch
 
 
@@ -63,3 +63,40 @@ class CalibrationModel:
         """d(targets)/d(values), (P*T*3, n), rows ordered as ``targets.reshape(-1)``."""
         mech = self.mechanism(values)
         return target_jacobian_batch(mech, self.params, values, prediction.qpos, self._plan)
+
+
+@dataclass(frozen=True)
+class ColumnJacobian:
+    """``model.jacobian(values, prediction)[:, columns]`` beside d(targets)/d(``extra``
+    parameters at zero), in one batched pass over the poses and without the columns not
+    asked for (a refit of some parameters evaluates it at every step).
+
+    A body's rotation parameters compose into one rotation vector, which enters the screw
+    of each: the other rotations of a body with a chosen one are computed along (and not
+    returned), so each column is the one of the whole set."""
+
+    model: CalibrationModel
+    params: ParameterSet  # the chosen parameters, their companions, then the extra ones
+    index: np.ndarray  # the model's parameter behind each of ``params`` but the extra ones
+    pick: np.ndarray  # the columns returned: the chosen ones in order, then the extra ones
+
+    @classmethod
+    def of(
+        cls, model: CalibrationModel, columns: np.ndarray, extra: ParameterSet | None = None
+    ) -> ColumnJacobian:
+        params, cols = model.params, np.asarray(columns, dtype=int)
+        rot = params.kind == KINDS.index("body_rot")
+        turned = np.unique(params.body[cols[rot[cols]]])
+        index = np.union1d(cols, np.flatnonzero(rot & np.isin(params.body, turned)))
+        added = list(extra.parameters) if extra is not None else []
+        chosen = ParameterSet([params.parameters[k] for k in index] + added, model.nominal.model)
+        pick = np.concatenate([np.searchsorted(index, cols), len(index) + np.arange(len(added))])
+        return cls(model, chosen, index, pick)
+
+    def __call__(self, values: np.ndarray, prediction: Prediction) -> np.ndarray:
+        """(P*T*3, len(columns) + len(extra)) at ``values`` (every parameter of the model)."""
+        values = np.asarray(values, dtype=float)
+        v = np.concatenate([values[self.index], np.zeros(len(self.params) - len(self.index))])
+        mech = self.model.mechanism(values)
+        jac = target_jacobian_batch(mech, self.params, v, prediction.qpos, self.model._plan)
+        return jac[:, self.pick]
