@@ -77,10 +77,14 @@ class TwistCompensation:
         base_values = np.array(base_values, dtype=float)
         poses = np.atleast_2d(np.asarray(poses, dtype=float))
         mech = model.mechanism(base_values)
-        qpos = np.empty((len(poses), mech.model.nq))
-        q = None
-        for i, pose in enumerate(poses):  # each pose started from the previous solution
-            q = qpos[i] = inverse(mech, pose, start=q).qpos
+        # the model's own inverse kinematics of these poses when it has them (the same
+        # solves: pose after pose from home), else solved here
+        qpos = model.solved_configurations(base_values, poses)
+        if qpos is None:
+            qpos = np.empty((len(poses), mech.model.nq))
+            q = None
+            for i, pose in enumerate(poses):  # each pose started from the previous solution
+                q = qpos[i] = inverse(mech, pose, start=q).qpos
         jac = tool_twist_jacobian_batch(mech, model.params, base_values, qpos)
         return cls(model, base_values, poses, qpos, jac, actuator_twist_jacobians(mech, qpos))
 

@@ -15,6 +15,7 @@ from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameters import KINDS, ParameterSet
 from twin.sensitivity_batch import JacobianPlan, target_jacobian_batch
+from twin.workspace import solve_poses
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,7 @@ class CalibrationModel:
         self._cache_key: bytes | None = None
         self._cache_mech: Mechanism | None = None
         self._warm: tuple[bytes, np.ndarray] | None = None
+        self._solved: tuple[tuple, np.ndarray] | None = None  # see commands_for_poses
         self._plan = JacobianPlan.for_mechanism(nominal)
 
     @property
@@ -48,6 +50,27 @@ class CalibrationModel:
             self._cache_key = key
         assert self._cache_mech is not None
         return self._cache_mech
+
+    def commands_for_poses(self, values: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """:func:`twin.workspace.commands_for_poses` on the model with ``values`` (SI). The
+        configurations it solved are kept (the last call's) for
+        :meth:`solved_configurations`: a compensation of the same poses on the same model
+        starts from them."""
+        values = np.asarray(values, dtype=float)
+        poses = np.atleast_2d(np.asarray(poses, dtype=float))
+        commands, qpos = solve_poses(self.mechanism(values), poses)
+        self._solved = ((values.tobytes(), poses.shape, poses.tobytes()), qpos)
+        return commands
+
+    def solved_configurations(self, values: np.ndarray, poses: np.ndarray) -> np.ndarray | None:
+        """The closed configurations (N, nq) of ``poses`` that :meth:`commands_for_poses`
+        solved last, if it solved these poses for these ``values`` (a copy); else None."""
+        values = np.asarray(values, dtype=float)
+        poses = np.atleast_2d(np.asarray(poses, dtype=float))
+        key = (values.tobytes(), poses.shape, poses.tobytes())
+        if self._solved is None or self._solved[0] != key:
+            return None
+        return self._solved[1].copy()
 
     def predict(self, values: np.ndarray, commands: np.ndarray) -> Prediction:
         """Targets at ``commands`` for parameter ``values``. Solving the same commands again
