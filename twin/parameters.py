@@ -138,11 +138,14 @@ class ParameterSet:
             for k in range(n):
                 self.subtree[k, b] = self.body[k] in chain
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
-        # the parameters of each kind, in order, and the body each rotation turns (as an
-        # index into ``_rot_bodies``): injection works on these arrays, not parameter by one
+        self._index_kinds()
+        self._local = threading.local()
+
+    def _index_kinds(self) -> None:
+        """The parameters of each kind, in order, and the body each rotation turns (as an
+        index into ``_rot_bodies``): injection works on these arrays, not parameter by one."""
         self._of_kind = [np.flatnonzero(self.kind == i) for i in range(len(KINDS))]
         self._rot_slot = np.searchsorted(self._rot_bodies, self.body[self._of_kind[1]])
-        self._local = threading.local()
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -151,6 +154,8 @@ class ParameterSet:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
+        if "_of_kind" not in state:  # pickled before the kinds were indexed
+            self._index_kinds()
         self._local = threading.local()
 
     def __len__(self) -> int:
