@@ -13,7 +13,7 @@ import numpy as np
 
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameters import KINDS, ParameterSet
+from twin.parameters import KINDS, Parameter, ParameterSet
 from twin.sensitivity_batch import JacobianPlan, target_jacobian_batch
 from twin.workspace import solve_poses
 
@@ -111,7 +111,11 @@ class ColumnJacobian:
         rot = params.kind == KINDS.index("body_rot")
         turned = np.unique(params.body[cols[rot[cols]]])
         index = np.union1d(cols, np.flatnonzero(rot & np.isin(params.body, turned)))
-        added = list(extra.parameters) if extra is not None else []
+        # the extra ones renamed apart (a name of theirs may also be one of the model's)
+        added = [
+            Parameter(f"extra:{p.name}", p.kind, p.element, p.axis)
+            for p in (extra.parameters if extra is not None else ())
+        ]
         chosen = ParameterSet([params.parameters[k] for k in index] + added, model.nominal.model)
         pick = np.concatenate([np.searchsorted(index, cols), len(index) + np.arange(len(added))])
         return cls(model, chosen, index, pick)

@@ -104,7 +104,7 @@ def test_column_jacobian_equals_the_whole_one_and_the_actuators(polisher):
     from calib.diagnosis_apply import actuator_jacobians_batch
     from calib.diagnosis_context import actuator_offsets
     from calib.model import ColumnJacobian
-    from twin.parameters import KINDS
+    from twin.parameters import KINDS, Parameter, ParameterSet
 
     model = polisher
     params = model.params
@@ -126,3 +126,10 @@ def test_column_jacobian_equals_the_whole_one_and_the_actuators(polisher):
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
     alone = ColumnJacobian.of(model, cols)(values, pred)
     np.testing.assert_allclose(alone, whole, rtol=0, atol=1e-12 * np.abs(whole).max())
+    # extra parameters named as some of the model's: kept apart
+    clash = ParameterSet(
+        [Parameter(params.names[0], p.kind, p.element) for p in offsets.parameters[:1]],
+        model.nominal.model,
+    )
+    same = ColumnJacobian.of(model, cols, clash)(values, pred)
+    np.testing.assert_array_equal(same[:, -1], got[:, len(cols)])
