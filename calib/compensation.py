@@ -46,6 +46,14 @@ def reachable_compensated_commands(
     return out, ok
 
 
+def corrected_poses(poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
+    """Poses (N, 6) moved against their predicted error twists (N, 6): the position by
+    ``-twist[:3]``, the orientation turned by ``-twist[3:]`` (world axes); every pose at once,
+    the arithmetic of each pose's own element by element."""
+    turned = matrix_from_rotvec(-twists[:, 3:]) @ matrix_from_rpy(poses[:, 3:])
+    return np.hstack([poses[:, :3] - twists[:, :3], rpy_from_matrix(turned)])
+
+
 @dataclass(frozen=True)
 class TwistCompensation:
     """The estimate-independent part of the first paper's Eq. (16) for a set of poses.
@@ -69,10 +77,14 @@ class TwistCompensation:
         base_values = np.array(base_values, dtype=float)
         poses = np.atleast_2d(np.asarray(poses, dtype=float))
         mech = model.mechanism(base_values)
-        qpos = np.empty((len(poses), mech.model.nq))
-        q = None
-        for i, pose in enumerate(poses):  # each pose started from the previous solution
-            q = qpos[i] = inverse(mech, pose, start=q).qpos
+        # the model's own inverse kinematics of these poses when it has them (the same
+        # solves: pose after pose from home), else solved here
+        qpos = model.solved_configurations(base_values, poses)
+        if qpos is None:
+            qpos = np.empty((len(poses), mech.model.nq))
+            q = None
+            for i, pose in enumerate(poses):  # each pose started from the previous solution
+                q = qpos[i] = inverse(mech, pose, start=q).qpos
         jac = tool_twist_jacobian_batch(mech, model.params, base_values, qpos)
         return cls(model, base_values, poses, qpos, jac, actuator_twist_jacobians(mech, qpos))
 
@@ -81,10 +93,7 @@ class TwistCompensation:
         delta`` of the estimate ``delta`` (SI, one value per column)."""
         mech = self.model.mechanism(self.base_values)
         twists = self.twist_jacobians[:, :, np.asarray(columns)] @ np.asarray(delta, dtype=float)
-        corrected = np.empty_like(self.poses)
-        for i, (pose, twist) in enumerate(zip(self.poses, twists, strict=True)):
-            r_cmd = rpy_from_matrix(matrix_from_rotvec(-twist[3:]) @ matrix_from_rpy(pose[3:]))
-            corrected[i] = np.concatenate([pose[:3] - twist[:3], r_cmd])
+        corrected = corrected_poses(self.poses, twists)
         # every pose at once, each from its first inverse kinematics (the same exact inverse
         # kinematics as twin.kinematics.inverse, to round-off; the same errors)
         return inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]

@@ -18,7 +18,6 @@ from calib.exceptions import IdentifiabilityError
 from calib.model import CalibrationModel
 from calib.nominal_targets import nominal_targets
 from calib.reconstruction import correlation_reconstruction
-from twin.workspace import commands_for_poses
 
 
 @dataclass(frozen=True)
@@ -39,8 +38,8 @@ def fine_problem(
     poses: np.ndarray,
     measure: Measure,
 ) -> FineProblem:
+    commands = model.commands_for_poses(base_values, poses)  # configurations kept
     mech = model.mechanism(base_values)
-    commands = commands_for_poses(mech, poses)
     measured = measure(commands)
     dp = (measured - nominal_targets(mech, poses)).reshape(-1)
     h_full = model.jacobian(base_values, model.predict(base_values, commands))

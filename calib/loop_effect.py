@@ -66,12 +66,11 @@ def diagnosed_correction(
     correction: linear coefficients free, shapes (the last entry of a shaped candidate's
     coefficients) fixed. Effects that are not actuator offsets are left out."""
     mech = model.nominal
-    lib = {
-        c.name: c
-        for c in default_candidates(
-            mech.actuator_names, mech.actuator_is_slide, mech.masses_defaulted
-        )
-    }
+    # the library effect_offsets builds by default, built once here for every evaluation
+    candidates = default_candidates(
+        mech.actuator_names, mech.actuator_is_slide, mech.masses_defaulted
+    )
+    lib = {c.name: c for c in candidates}
     parts: list[tuple[str, int, float | None]] = []  # name, k, shape
     names: list[str] = []
     theta: list[float] = []
@@ -101,6 +100,7 @@ def diagnosed_correction(
                         commands,
                         order,
                         {name: unit},
+                        candidates,
                         time_origin=time_origin,
                         time_unit=time_unit,
                     )

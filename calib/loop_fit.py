@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.diagnosis_apply import actuator_jacobians_batch
+from calib.diagnosis_context import actuator_offsets
 from calib.estimators.levenberg_marquardt import (
     JacobianFn,
     LMOptions,
@@ -23,7 +23,7 @@ from calib.estimators.levenberg_marquardt import (
     levenberg_marquardt,
 )
 from calib.loop_effect import ActuatorCorrection
-from calib.model import CalibrationModel
+from calib.model import CalibrationModel, ColumnJacobian
 from twin.exceptions import ClosureError
 
 # Gauss-Newton polish after Levenberg-Marquardt: stop once a step moves every parameter by at
@@ -84,13 +84,16 @@ def fit_with_effect(
         pred = model.predict(x, q)
         return (measured - pred.targets).reshape(-1), (x, pred)
 
+    # the geometry's columns and the actuators' (offsets of their joints) in one pass
+    columns_and_actuators = ColumnJacobian.of(model, cols, actuator_offsets(model) if k else None)
+
     def jacobian(z: np.ndarray, state) -> np.ndarray:
         x, pred = state
-        j_geo = model.jacobian(x, pred)[:, cols]
+        jac = columns_and_actuators(x, pred)
         if not k:
-            return -j_geo
-        j_act = actuator_jacobians_batch(model, x, pred.qpos)  # (N, T*3, A)
-        j_eff = np.einsum("nra,nak->nrk", j_act, d).reshape(-1, k)
+            return -jac
+        j_geo, j_act = jac[:, :n_geo], jac[:, n_geo:].reshape(len(commands), -1, d.shape[1])
+        j_eff = np.einsum("nra,nak->nrk", j_act, d).reshape(-1, k)  # j_act (N, T*3, A)
         return -np.hstack([j_geo, j_eff])
 
     z0 = np.concatenate([base[cols], correction.theta])

@@ -25,7 +25,10 @@ from typing import Any
 import numpy as np
 
 from calib.compensation import TwistCompensation
-from calib.estimators.registry import make_estimator
+from calib.estimators.linear import DrawEstimator, draws
+from calib.estimators.liu import Liu
+from calib.estimators.liu_paper_units import LiuPaperUnits
+from calib.estimators.ols import OLS
 from calib.nominal_targets import nominal_targets
 from calib.orientation_reach import orientation_reach
 from scenarios.config import Scenario
@@ -49,7 +52,7 @@ from twin.parameters import KINDS, ParameterSet
 # the rows that do not depend on the estimator, coarse and OLS, position max and mean.
 POSITION_FACTOR = 1.5
 MATCHED_ROWS = ("coarse", "ols")
-MC_CHUNK = 2000  # Monte Carlo runs estimated at once
+MC_CHUNK = 2000  # Monte Carlo runs projected at once
 
 
 def paper_match(layers: dict[str, dict[str, dict[str, float]]]) -> dict[str, Any]:
@@ -85,22 +88,19 @@ def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) 
     noise = bench.rng.normal(0.0, bench.sigma_m, size=(runs, dp_clean.size))
     shown = params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
     scale = np.diag(shown)  # SI -> mm/deg per kept parameter
-    estimators = {
-        "ols": make_estimator("ols"),
-        "liu": make_estimator("liu"),
-        "liu_k1": make_estimator("liu", k=1.0),
-        "liu_paper_deg": make_estimator("liu_paper", angle_unit="deg", is_angle=problem.is_angle),
-        "liu_paper_rad": make_estimator("liu_paper", angle_unit="rad", is_angle=problem.is_angle),
+    estimators: dict[str, DrawEstimator] = {
+        "ols": OLS(),
+        "liu": Liu(),
+        "liu_k1": Liu(k=1.0),
+        "liu_paper_deg": LiuPaperUnits(angle_unit="deg", is_angle=problem.is_angle),
+        "liu_paper_rad": LiuPaperUnits(angle_unit="rad", is_angle=problem.is_angle),
     }
-    draws = {label: np.empty((runs, len(scale))) for label in estimators}
-    # the runs in chunks: each run's estimate is its own, and the temporaries of a chunk (the
-    # estimators form several arrays of the measurements' size) stay small
-    for lo in range(0, runs, MC_CHUNK):
-        ys = dp_clean[None, :] + noise[lo : lo + MC_CHUNK]
-        for label, est in estimators.items():
-            draws[label][lo : lo + MC_CHUNK] = est.fit_many(problem.h, ys) * scale
-        progress.counter("runs", min(lo + MC_CHUNK, runs), runs)
-    return {label: float(np.sqrt(np.sum(d.var(axis=0, ddof=1)))) for label, d in draws.items()}
+    # each run's estimate is its own; what the estimators share of a run (its products with
+    # the singular vectors of H, its OLS residual) is computed once, MC_CHUNK runs at a time
+    shared = draws(problem.h, dp_clean, noise, MC_CHUNK)
+    out = {label: est.fit_draws(shared) * scale for label, est in estimators.items()}
+    progress.counter("runs", runs, runs)
+    return {label: float(np.sqrt(np.sum(d.var(axis=0, ddof=1)))) for label, d in out.items()}
 
 
 def orientation_check(

@@ -91,3 +91,43 @@ def test_prepared_inverse_kinematics_are_the_controllers_commands(polisher):
     far[2, 0] = 10.0  # 10 m: outside the box
     with pytest.raises(WorkspaceError, match="pose 2"):
         checked_commands(mech, far, from_prep)
+
+
+def test_poses_corrected_at_once_equal_pose_by_pose():
+    """Bitwise: the correction of Eq. (16) on whole arrays against each pose's own."""
+    from calib.compensation import corrected_poses
+
+    rng = np.random.default_rng(8)
+    for n in (1, 9, 98):
+        poses = np.hstack([rng.uniform(-0.3, 0.3, (n, 3)), rng.uniform(-0.4, 0.4, (n, 3))])
+        poses[: n // 2, 3:] = 0.0  # the layers' poses: no rotation
+        twists = rng.normal(0.0, 1e-4, (n, 6))
+        expected = [
+            np.concatenate(
+                [
+                    p[:3] - t[:3],
+                    rpy_from_matrix(matrix_from_rotvec(-t[3:]) @ matrix_from_rpy(p[3:])),
+                ]
+            )
+            for p, t in zip(poses, twists, strict=True)
+        ]
+        np.testing.assert_array_equal(corrected_poses(poses, twists), np.array(expected))
+
+
+def test_compensation_starts_from_the_models_own_solves_of_the_same_poses(polisher):
+    """The fine plan's inverse kinematics kept by the model (CalibrationModel.commands_for_poses)
+    is what the compensation's preparation would solve again: bitwise the same, and only
+    for the same values and poses."""
+    model, base, poses, columns, rng = polisher
+    fresh = CalibrationModel(model.nominal, model.params)
+    alone = TwistCompensation.prepare(fresh, base, poses)  # nothing kept: solved here
+    commands = fresh.commands_for_poses(base, poses)
+    np.testing.assert_array_equal(commands, commands_for_poses(fresh.mechanism(base), poses))
+    np.testing.assert_array_equal(fresh.solved_configurations(base, poses), alone.qpos)
+    assert fresh.solved_configurations(base + 1e-9, poses) is None
+    assert fresh.solved_configurations(base, poses[:-1]) is None
+    kept = TwistCompensation.prepare(fresh, base, poses)
+    np.testing.assert_array_equal(kept.qpos, alone.qpos)
+    np.testing.assert_array_equal(kept.twist_jacobians, alone.twist_jacobians)
+    delta = rng.uniform(-1e-3, 1e-3, len(columns))
+    np.testing.assert_array_equal(kept.commands(delta, columns), alone.commands(delta, columns))

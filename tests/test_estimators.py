@@ -434,3 +434,35 @@ def test_liu_in_the_papers_units_is_eq_11_literally():
     assert not np.allclose(out["deg"], out["rad"], rtol=1e-8, atol=0)
     with pytest.raises(ValueError, match="which of the H columns are angles"):
         LiuPaperUnits().fit(h, y)
+
+
+def test_draws_give_each_estimator_its_fit_many():
+    """The Monte Carlo's shared products (calib.estimators.linear.draws): every estimator that
+    reads them gives what its fit_many gives on the measurement vectors y0 + noise."""
+    from calib.estimators.linear import draws, prepare
+    from calib.estimators.liu_paper_units import LiuPaperUnits
+
+    h, x, rng = calibration_like()
+    is_angle = np.array([False, True, False, True, False, True, False, False])
+    y0 = h @ x + 1e-3 * rng.normal(size=h.shape[0])  # not in the column space of H
+    noise = 1e-3 * rng.normal(size=(50, h.shape[0]))
+    ys = y0 + noise
+    shared = draws(h, y0, noise, chunk=7)  # several chunks, the last one short
+    prob = prepare(h)
+    np.testing.assert_allclose(shared.yu, ys @ prob.u, rtol=0, atol=1e-13 * np.abs(ys).max())
+    np.testing.assert_allclose(shared.rss, prob.ols_rss(ys), rtol=1e-12)
+    for est in (
+        OLS(),
+        Liu(),
+        Liu(k=1.0),
+        Liu(k=1.0, sigma2_rule="paper"),
+        Liu(k=1.0, d=0.4),
+        LiuPaperUnits(angle_unit="deg", is_angle=is_angle),
+        LiuPaperUnits(angle_unit="rad", is_angle=is_angle),
+    ):
+        many = est.fit_many(h, ys)
+        np.testing.assert_allclose(
+            est.fit_draws(shared), many, rtol=1e-12, atol=1e-12 * np.abs(many).max()
+        )
+    with pytest.raises(ValueError, match="noise must be"):
+        draws(h, y0, noise[:, :-1])

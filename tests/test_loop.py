@@ -95,3 +95,41 @@ def test_fixed_point_refuses_a_correction_steeper_than_the_command(polisher):
 
     with pytest.raises(ConvergenceError, match="did not settle"):
         invert_correction(corr, q, np.arange(len(q)))
+
+
+def test_column_jacobian_equals_the_whole_one_and_the_actuators(polisher):
+    """The loop's Jacobian in one pass (calib.model.ColumnJacobian) against the whole
+    identification Jacobian's columns and the per-actuator one, at geometry where the body
+    rotations left out of the columns are not zero (their rotation vectors compose)."""
+    from calib.diagnosis_apply import actuator_jacobians_batch
+    from calib.diagnosis_context import actuator_offsets
+    from calib.model import ColumnJacobian
+    from twin.parameters import KINDS, Parameter, ParameterSet
+
+    model = polisher
+    params = model.params
+    rng = np.random.default_rng(4)
+    values = rng.uniform(-3e-4, 3e-4, model.n_parameters)
+    rot = np.flatnonzero(params.kind == KINDS.index("body_rot"))
+    body = params.body[rot[0]]
+    companions = rot[params.body[rot] == body]
+    assert len(companions) > 1  # a body with several rotations, one of them chosen
+    cols = np.sort(np.concatenate([companions[:1], rng.choice(model.n_parameters, 20, False)]))
+    cols = np.unique(cols[~np.isin(cols, companions[1:])])
+    cmds = commands_for_poses(model.nominal, _plan(model))
+    pred = model.predict(values, cmds)
+    offsets = actuator_offsets(model)
+    got = ColumnJacobian.of(model, cols, offsets)(values, pred)
+    whole = model.jacobian(values, pred)[:, cols]
+    act = actuator_jacobians_batch(model, values, pred.qpos).reshape(len(whole), -1)
+    expected = np.hstack([whole, act])
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    alone = ColumnJacobian.of(model, cols)(values, pred)
+    np.testing.assert_allclose(alone, whole, rtol=0, atol=1e-12 * np.abs(whole).max())
+    # extra parameters named as some of the model's: kept apart
+    clash = ParameterSet(
+        [Parameter(params.names[0], p.kind, p.element) for p in offsets.parameters[:1]],
+        model.nominal.model,
+    )
+    same = ColumnJacobian.of(model, cols, clash)(values, pred)
+    np.testing.assert_array_equal(same[:, -1], got[:, len(cols)])

@@ -472,3 +472,43 @@ def test_parameter_set_copies_and_pickles():
     ref = params.inject(nominal.model, values).body_pos.copy()
     for other in (copy.deepcopy(params), pickle.loads(pickle.dumps(params))):
         np.testing.assert_array_equal(other.inject(nominal.model, values).body_pos, ref)
+
+
+def _inject_one_by_one(params: ParameterSet, nominal: mujoco.MjModel, values: np.ndarray):
+    """The reference injection: one parameter after the other, one rotated body after the
+    other (what ParameterSet.inject does on whole arrays)."""
+    import copy
+
+    model = copy.deepcopy(nominal)
+    rotvecs: dict[int, np.ndarray] = {}
+    for k in range(len(params)):
+        kind, i, v = params.kind[k], params.element[k], values[k]
+        if kind == 0:
+            model.body_pos[i] += params.axis[k] * v
+        elif kind == 1:
+            b = int(params.body[k])
+            rotvecs[b] = rotvecs.get(b, np.zeros(3)) + params.axis[k] * v
+        elif kind == 2:
+            model.site_pos[i] += params.axis[k] * v
+        else:
+            model.qpos0[model.jnt_qposadr[i]] -= v
+    for b, w in rotvecs.items():
+        model.body_quat[b] = quat_multiply(quat_from_rotvec(w), nominal.body_quat[b])
+    mujoco.mj_setConst(model, mujoco.MjData(model))
+    return model, rotvecs
+
+
+@pytest.mark.parametrize("machine", ["hexapod_rrrprr", "polisher", "arm6r"])
+def test_inject_on_whole_arrays_equals_one_parameter_after_the_other(machine):
+    """Bitwise: several parameters of one body, site or joint add up in parameter order."""
+    nominal = Mechanism.from_xml(ROOT / "models" / f"{machine}.xml")
+    params = load_parameter_set(ROOT / "models" / f"{machine}.params.toml", nominal.model)
+    values = np.random.default_rng(5).uniform(-2e-3, 2e-3, len(params))
+    model = params.inject(nominal.model, values)
+    ref, rotvecs = _inject_one_by_one(params, nominal.model, values)
+    for field in ("body_pos", "body_quat", "site_pos", "qpos0", "body_ipos", "site_quat"):
+        np.testing.assert_array_equal(getattr(model, field), getattr(ref, field), err_msg=field)
+    got = params.rotation_vectors(values)
+    assert got.keys() == rotvecs.keys()
+    for b, w in rotvecs.items():
+        np.testing.assert_array_equal(got[b], w)

@@ -93,9 +93,12 @@ def inverse_near(
             c, q = np.empty((len(poses), mech.n_actuators)), np.empty_like(start)
         if failed.size:
             c[failed], q[failed] = _one_by_one(mech, poses, start, failed)
-    if check_stroke:
-        for pose, row in zip(poses, c, strict=True):
-            _check_stroke(mech, pose, row)
+    if check_stroke:  # every row tested at once; the first failing one raises its message
+        lo, hi = mech.actuator_range[:, 0], mech.actuator_range[:, 1]
+        with np.errstate(invalid="ignore"):
+            ok = np.all(np.isfinite(c) & (c >= lo - 1e-12) & (c <= hi + 1e-12), axis=1)
+        for i in np.flatnonzero(~ok):
+            _check_stroke(mech, poses[i], c[i])
     return c, q
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from twin.effects.base import (
     Effect,
+    GeometryEffect,
     apply_actuator_effects,
     check_effects,
     model_at,
@@ -37,9 +38,19 @@ class Measurement:
 
 
 def check_commands_batch(mech: Mechanism, commands: np.ndarray) -> None:
-    for k, c in enumerate(np.atleast_2d(commands)):
+    """check_commands of every row; the first row that fails raises, naming its pose (the
+    rows are tested together, the failing one alone again for its message)."""
+    c = np.atleast_2d(np.asarray(commands, dtype=float))
+    if c.ndim == 2 and c.shape[1] == mech.n_actuators:
+        lo, hi = mech.actuator_range[:, 0], mech.actuator_range[:, 1]
+        with np.errstate(invalid="ignore"):
+            bad = ~np.all(np.isfinite(c) & (c >= lo - 1e-12) & (c <= hi + 1e-12), axis=1)
+        rows = np.flatnonzero(bad)
+    else:
+        rows = np.arange(len(c))  # the first row's shape is wrong: its own message
+    for k in rows:
         try:
-            check_commands(mech, c)
+            check_commands(mech, c[k])
         except Exception as exc:
             raise type(exc)(f"pose {k}: {exc}") from None
 
@@ -48,9 +59,12 @@ def _models_per_pose(
     truth: Mechanism, effects: Sequence[Effect], order: np.ndarray
 ) -> list[tuple[Mechanism, np.ndarray]]:
     """Groups of poses (indices) that share one geometry; one group when nothing changes."""
+    geometry = [e for e in effects if isinstance(e, GeometryEffect)]
+    if not geometry:  # one geometry for every pose
+        return [(truth, np.arange(len(order)))]
     groups: dict[int, tuple[Mechanism, list[int]]] = {}
     for i, k in enumerate(order):
-        mech = model_at(truth, effects, int(k))
+        mech = model_at(truth, geometry, int(k))
         groups.setdefault(id(mech), (mech, []))[1].append(i)
     return [(mech, np.array(ids)) for mech, ids in groups.values()]
 

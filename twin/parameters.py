@@ -138,7 +138,14 @@ class ParameterSet:
             for k in range(n):
                 self.subtree[k, b] = self.body[k] in chain
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
+        self._index_kinds()
         self._local = threading.local()
+
+    def _index_kinds(self) -> None:
+        """The parameters of each kind, in order, and the body each rotation turns (as an
+        index into ``_rot_bodies``): injection works on these arrays, not parameter by one."""
+        self._of_kind = [np.flatnonzero(self.kind == i) for i in range(len(KINDS))]
+        self._rot_slot = np.searchsorted(self._rot_bodies, self.body[self._of_kind[1]])
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -147,6 +154,8 @@ class ParameterSet:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
+        if "_of_kind" not in state:  # pickled before the kinds were indexed
+            self._index_kinds()
         self._local = threading.local()
 
     def __len__(self) -> int:
@@ -174,11 +183,15 @@ class ParameterSet:
     # ----------------------------------------------------------------- injection
     def rotation_vectors(self, values: np.ndarray) -> dict[int, np.ndarray]:
         """Per rotated body, the rotation vector w = sum(axis_k v_k) (parent frame)."""
-        out: dict[int, np.ndarray] = {}
-        for k in np.flatnonzero(self.kind == 1):
-            b = int(self.body[k])
-            out[b] = out.get(b, np.zeros(3)) + self.axis[k] * values[k]
-        return out
+        w = self._rotation_vector_array(values)
+        return {b: w[i] for i, b in enumerate(self._rot_bodies)}
+
+    def _rotation_vector_array(self, values: np.ndarray) -> np.ndarray:
+        """(len(_rot_bodies), 3): the rotation vectors, each summed in parameter order."""
+        k1 = self._of_kind[1]
+        w = np.zeros((len(self._rot_bodies), 3))
+        np.add.at(w, self._rot_slot, self.axis[k1] * np.asarray(values)[k1, None])
+        return w
 
     def inject(self, nominal: mujoco.MjModel, values: np.ndarray) -> mujoco.MjModel:
         """A copy of ``nominal`` with the deviations ``values`` (SI) applied."""
@@ -189,15 +202,15 @@ class ParameterSet:
             bad = [self.names[k] for k in np.flatnonzero(~np.isfinite(values))]
             raise ParameterError(f"non-finite parameter values for {bad}")
         model = copy.deepcopy(nominal)
-        for k in range(len(self)):
-            kind, i, v = self.kind[k], self.element[k], values[k]
-            if kind == 0:
-                model.body_pos[i] += self.axis[k] * v
-            elif kind == 2:
-                model.site_pos[i] += self.axis[k] * v
-            elif kind == 3:
-                model.qpos0[model.jnt_qposadr[i]] -= v
-        for b, w in self.rotation_vectors(values).items():
+        # several parameters of one element add up in parameter order (np.add.at is
+        # unbuffered and sequential: the same sums as one parameter after the other)
+        k0, _, k2, k3 = self._of_kind
+        np.add.at(model.body_pos, self.element[k0], self.axis[k0] * values[k0, None])
+        np.add.at(model.site_pos, self.element[k2], self.axis[k2] * values[k2, None])
+        np.add.at(model.qpos0, model.jnt_qposadr[self.element[k3]], -values[k3])
+        if self._rot_bodies:
+            b = np.array(self._rot_bodies)
+            w = self._rotation_vector_array(values)
             model.body_quat[b] = quat_multiply(quat_from_rotvec(w), nominal.body_quat[b])
         mujoco.mj_setConst(model, self._scratch_data(nominal))
         return model

@@ -103,9 +103,18 @@ def commands_for_poses(
 
     ``labels`` (one per pose, e.g. a dataset's ``pose_id`` values) name the poses in errors;
     without them a pose is named by its row index. Values are shown in mm and deg."""
+    return solve_poses(mech, poses, labels)[0]
+
+
+def solve_poses(
+    mech: Mechanism, poses: np.ndarray, labels: Sequence[object] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`commands_for_poses` and the closed configurations (N, nq) it solved, each pose
+    started from the previous one's solution (the first from home)."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     check_labels(labels, len(poses))
     out = np.empty((len(poses), mech.n_actuators))
+    qpos = np.empty((len(poses), mech.model.nq))
     q = None
     for i, p in enumerate(poses):
         try:
@@ -117,8 +126,8 @@ def commands_for_poses(
         except (WorkspaceError, ClosureError) as exc:
             raise type(exc)(f"{pose_name(i, labels)}: {exc}") from None
         out[i] = sol.actuators
-        q = sol.qpos
-    return out
+        q = qpos[i] = sol.qpos
+    return out, qpos
 
 
 def checked_commands(

@@ -136,6 +136,59 @@ def prepare(h: np.ndarray, y: np.ndarray | None = None, many: bool = False) -> S
     return Scaled(hs, scale, u, s, vt)
 
 
+@dataclass(frozen=True)
+class Draws:
+    """Many measurement vectors y_i = y0 + e_i (a Monte Carlo over noise draws e_i on one H)
+    as every spectral filter needs them: their products with the left singular vectors of
+    the scaled problem and their OLS residual sums of squares, computed once for all the
+    estimators that read them (``fit_draws``)."""
+
+    h: np.ndarray  # (n, m) as given
+    prob: Scaled
+    yu: np.ndarray  # (runs, m) y_i @ u
+    rss: np.ndarray  # (runs,) |y_i - u u^T y_i|^2
+
+    @property
+    def alpha(self) -> np.ndarray:
+        """OLS in canonical coordinates, (runs, m)."""
+        return self.yu / self.prob.s
+
+
+class DrawEstimator(Protocol):
+    """An estimator that reads a Monte Carlo's shared :class:`Draws` (OLS, Liu, paper Liu)."""
+
+    def fit_draws(self, draws: Draws) -> np.ndarray: ...
+
+
+def draws(h: np.ndarray, y0: np.ndarray, noise: np.ndarray, chunk: int = 2000) -> Draws:
+    """:class:`Draws` of y0 (n,) plus every row of ``noise`` (runs, n), ``chunk`` rows at a
+    time (no temporary larger than chunk x n).
+
+    y_i @ u = y0 @ u + e_i @ u, and with r0 the OLS residual of y0 (orthogonal to the
+    columns of H) the residual sum of squares is |r0|^2 + 2 r0.e_i + |e_i|^2 - |e_i @ u|^2:
+    no (runs, n) residual is formed, and nothing cancels but |e_i|^2 - |e_i @ u|^2, whose
+    ratio is about n / (n - m)."""
+    prob = prepare(h, y0)
+    y0 = np.asarray(y0, dtype=float)
+    noise = np.atleast_2d(np.asarray(noise, dtype=float))
+    if noise.ndim != 2 or noise.shape[1] != prob.n:
+        raise ValueError(f"the noise must be (runs, {prob.n}), got shape {noise.shape}")
+    if not np.all(np.isfinite(noise)):
+        raise ValueError("the noise draws contain NaN or inf")
+    y0u = y0 @ prob.u
+    r0 = y0 - y0u @ prob.u.T
+    yu = np.empty((len(noise), prob.m))
+    rss = np.empty(len(noise))
+    for lo in range(0, len(noise), chunk):
+        e = noise[lo : lo + chunk]
+        eu = e @ prob.u
+        yu[lo : lo + chunk] = y0u + eu
+        rss[lo : lo + chunk] = (
+            r0 @ r0 + 2.0 * (e @ r0) + np.einsum("ij,ij->i", e, e) - np.einsum("ij,ij->i", eu, eu)
+        )
+    return Draws(np.asarray(h, dtype=float), prob, yu, rss)
+
+
 def check_sigma2(sigma2: float) -> float:
     s2 = float(sigma2)
     if not (np.isfinite(s2) and s2 >= 0):

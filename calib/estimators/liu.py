@@ -48,6 +48,7 @@ from typing import Literal
 import numpy as np
 
 from calib.estimators.linear import (
+    Draws,
     LinearEstimate,
     Scaled,
     check_sigma2,
@@ -99,7 +100,9 @@ class Liu:
         self.sigma2_rule = sigma2_rule
 
     def _sigma2(self, prob: Scaled, ys: np.ndarray, yu: np.ndarray | None = None) -> np.ndarray:
-        rss = prob.ols_rss(ys, yu)
+        return self._sigma2_of_rss(prob, prob.ols_rss(ys, yu))
+
+    def _sigma2_of_rss(self, prob: Scaled, rss: np.ndarray) -> np.ndarray:
         return rss / (prob.n if self.sigma2_rule == "paper" else prob.n - prob.m)
 
     def _d_and_k(self, prob: Scaled, alpha: np.ndarray, s2: np.ndarray):
@@ -139,7 +142,14 @@ class Liu:
         prob = prepare(h, ys, many=True)
         ys = np.atleast_2d(np.asarray(ys, dtype=float))
         yu = ys @ prob.u  # once for alpha, sigma^2 and the estimate (the same numbers)
-        alpha = yu / prob.s  # prob.alpha(ys)
-        k, _, d = self._d_and_k(prob, alpha, self._sigma2(prob, ys, yu))
+        return self._filtered(prob, yu / prob.s, self._sigma2(prob, ys, yu))
+
+    def fit_draws(self, draws: Draws) -> np.ndarray:
+        """:meth:`fit_many` of the draws' measurement vectors, from their shared products."""
+        return self._filtered(draws.prob, draws.alpha, self._sigma2_of_rss(draws.prob, draws.rss))
+
+    def _filtered(self, prob: Scaled, alpha: np.ndarray, s2: np.ndarray) -> np.ndarray:
+        """Estimates (runs, m) from alpha (runs, m) and sigma^2 (runs,): k and d per run."""
+        k, _, d = self._d_and_k(prob, alpha, s2)
         f = (prob.lambdas[None, :] + d[:, None]) / (prob.lambdas[None, :] + k[:, None])
         return ((alpha * f) @ prob.vt) / prob.scale  # prob.filtered(ys, f)

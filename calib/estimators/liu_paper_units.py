@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.estimators.linear import LinearEstimate, check_sigma2
+from calib.estimators.linear import Draws, LinearEstimate, check_sigma2
 from calib.estimators.liu import liu_d_optimal
 
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
@@ -40,25 +40,34 @@ class LiuPaperUnits:
             )
         return np.where(self.is_angle, 1.0 / ANGLE_UNITS[self.angle_unit], 1e3)
 
-    def _solve(self, h: np.ndarray, ys: np.ndarray):
+    def _svd(self, h: np.ndarray):
+        """(units, u, s, vt): paper units per SI unit and the thin SVD of H in paper units."""
         h = np.asarray(h, dtype=float)
         n, m = h.shape
         if n <= m:
             raise ValueError(f"{n} equations for {m} unknowns: Liu needs more equations")
         units = self._units(m)
         hp = h * 1e3 / units  # mm of target per paper unit of parameter
-        u, s, vt = np.linalg.svd(hp, full_matrices=False)
+        return (units, *np.linalg.svd(hp, full_matrices=False))
+
+    def _solve(self, h: np.ndarray, ys: np.ndarray):
+        units, u, s, vt = self._svd(h)
+        n, m = u.shape
         yp = np.atleast_2d(ys) * 1e3  # mm
         yu = yp @ u  # once for alpha and the residual
-        alpha = yu / s
         rss = np.sum((yp - yu @ u.T) ** 2, axis=1)
-        s2 = rss / (n - m)
-        lam = s**2
+        x, d, s2, f = self._filtered(yu / s, rss / (n - m), s**2, vt, units)
+        return x, d, s2, (u, s, vt, units, f)
+
+    def _filtered(
+        self, alpha: np.ndarray, s2: np.ndarray, lam: np.ndarray, vt: np.ndarray, units: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(x SI, d, sigma^2, filter) per run from alpha (runs, m) and sigma^2 in mm^2."""
         d = liu_d_optimal(lam, alpha, s2, self.k)
         d = np.where(np.isfinite(d), np.clip(d, 0.0, self.k), self.k)
         f = (lam[None, :] + d[:, None]) / (lam[None, :] + self.k)
         x_paper = (alpha * f) @ vt
-        return x_paper / units, d, s2, (u, s, vt, units, f)
+        return x_paper / units, d, s2, f
 
     def fit(self, h: np.ndarray, y: np.ndarray, sigma2: float | None = None) -> LinearEstimate:
         x, d, s2, (u, s, vt, units, f) = self._solve(h, y)
@@ -85,3 +94,14 @@ class LiuPaperUnits:
 
     def fit_many(self, h: np.ndarray, ys: np.ndarray) -> np.ndarray:
         return self._solve(h, ys)[0]
+
+    def fit_draws(self, draws: Draws) -> np.ndarray:
+        """:meth:`fit_many` of the draws' measurement vectors, from their shared products:
+        H in paper units has the column space of the scaled H, so each draw's products with
+        its left singular vectors are the shared ones turned by w = u_s^T u (m x m), and its
+        residual sum of squares is the shared one (in mm^2)."""
+        units, u, s, vt = self._svd(draws.h)
+        n, m = u.shape
+        w = draws.prob.u.T @ u
+        alpha = (draws.yu @ w) * 1e3 / s
+        return self._filtered(alpha, draws.rss * 1e6 / (n - m), s**2, vt, units)[0]

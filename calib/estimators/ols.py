@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from calib.estimators.linear import (
+    Draws,
     LinearEstimate,
     check_sigma2,
     estimate_from_filter,
@@ -31,3 +32,7 @@ class OLS:
         """Estimates (runs, m) for measurement vectors ys (runs, n), one factorisation of H."""
         prob = prepare(h, ys, many=True)
         return prob.filtered(np.atleast_2d(np.asarray(ys, dtype=float)), np.ones(prob.m))
+
+    def fit_draws(self, draws: Draws) -> np.ndarray:
+        """:meth:`fit_many` of the draws' measurement vectors, from their shared products."""
+        return (draws.alpha @ draws.prob.vt) / draws.prob.scale
