@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib.bounded_search import minimise_together
 from calib.diagnosis_candidates import NO_SHAPE, Candidate, PoseRows
 from calib.diagnosis_context import Context
 
@@ -143,13 +144,14 @@ def _solve(
     projection ``rp``, and the candidates' columns ``xt`` (rows, k)."""
     k = xt.shape[1]
     xp = xt - q @ (q.T @ xt)
-    scale = np.linalg.norm(xp, axis=0)
+    scale = np.sqrt(np.add.reduce(xp * xp, axis=0))  # np.linalg.norm(xp, axis=0)'s arithmetic
     # a column the data does not see (a joint no load reaches, a harmonic of a joint that
     # did not turn, or one the geometry spans): its parameter stays 0, not 1 / 0
     live = scale > RCOND * max(float(scale.max(initial=0.0)), 1e-300)
     theta = np.zeros(k)
     if np.any(live):
-        a, sc = xp[:, live] / scale[live], scale[live]
+        # every column seen (the usual case): the columns themselves, not a copy of them
+        a, sc = (xp / scale, scale) if live.all() else (xp[:, live] / scale[live], scale[live])
         if lower is not None and np.any(np.isfinite(lower[live])):
             from scipy.optimize import lsq_linear  # lazy: scipy.optimize costs 0.7 s
 
@@ -255,15 +257,13 @@ class Projection:
 def projection(prob: Problem, fixed: list[np.ndarray], poses: np.ndarray) -> Projection:
     """What :func:`rss_over_grid` needs of the poses and ``fixed``, whatever the shape: one
     computation serves the grid scan and every refinement of one candidate's shape."""
-    rt = prob.residual_rows(poses)
     q0, _ = prob.basis(poses)
+    rt, rp = prob.projected_residual(poses)
     if fixed:
         xf = _flat(fixed, poses).reshape(len(rt), -1)
         q = _orth(np.hstack([q0, xf - q0 @ (q0.T @ xf)]))
-    else:
-        q = q0
-    rp = rt - q @ (q.T @ rt)
-    return Projection(q, rp, float(rp @ rp), len(rt))
+        rp = rt - q @ (q.T @ rt)
+    return Projection(q0 if not fixed else q, rp, float(rp @ rp), len(rt))
 
 
 def rss_over_grid(
@@ -292,11 +292,16 @@ def rss_over_grid(
     return out
 
 
-def rss_at(cand: Candidate, ctx: Context, shape: float, at: PoseRows, proj: Projection) -> float:
-    """``rss_over_grid(..., [shape], poses, proj=proj)[0]`` (the same arithmetic) for the
-    poses of ``at``: one shape of a refinement."""
-    ata, atb = _normal_equations_of(cand.design_at(ctx, shape, at).reshape(1, proj.m, -1), proj)
-    return float(proj.base - _explained(ata, atb)[0])
+def rss_at(
+    cand: Candidate, ctx: Context, shapes: list[float], at: PoseRows, proj: Projection
+) -> list[float]:
+    """``rss_over_grid(..., [shape], poses, proj=proj)[0]`` at each of ``shapes`` for the
+    poses of ``at``: the same arithmetic shape by shape (a matrix product or solve of a stack
+    is the product or solve of each of its items), one stack for the points of the
+    refinements running side by side."""
+    x = np.stack([cand.design_at(ctx, float(v), at) for v in shapes])
+    ata, atb = _normal_equations_of(x.reshape(len(shapes), proj.m, -1), proj)
+    return [float(proj.base - e) for e in _explained(ata, atb, each_alone=True)]
 
 
 def _normal_equations(
@@ -382,8 +387,10 @@ def _ridge(k: int) -> np.ndarray:
     return ridge
 
 
-def _explained(ata: np.ndarray, atb: np.ndarray) -> np.ndarray:
-    """b^T A^-1 b at each shape, on the column-normalised normal equations."""
+def _explained(ata: np.ndarray, atb: np.ndarray, each_alone: bool = False) -> np.ndarray:
+    """b^T A^-1 b at each shape, on the column-normalised normal equations. A singular
+    system makes the whole stack use the pseudo-inverse; ``each_alone``: only that shape
+    (each value then what the shape alone gives)."""
     d = np.sqrt(np.maximum(np.einsum("skk->sk", ata), 0.0))
     d[d < 1e-300] = 1.0
     a_n = ata / d[:, :, None] / d[:, None, :]
@@ -392,36 +399,49 @@ def _explained(ata: np.ndarray, atb: np.ndarray) -> np.ndarray:
     try:
         sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
     except np.linalg.LinAlgError:
+        if each_alone and len(ata) > 1:
+            return np.concatenate(
+                [_explained(ata[i : i + 1], atb[i : i + 1]) for i in range(len(ata))]
+            )
         sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
     return np.einsum("sk,sk->s", b_n, sol)
 
 
-def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = None) -> float:
-    """Refine the shape between the grid neighbours of index ``i``."""
+def _interval(cand: Candidate, grid: np.ndarray, i: int) -> tuple[float, float] | None:
+    """Where the shape at grid index ``i`` is refined: between its grid neighbours (their
+    logarithms for a log-scaled shape); None: the grid value stays."""
     s = float(grid[i])
     if cand.shape_name == "harmonic" or not np.isfinite(s) or len(grid) < 3:
-        return s
+        return None
     lo, hi = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, len(grid) - 1)])
     if not (np.isfinite(lo) and np.isfinite(hi)):
-        return s
+        return None
     lo, hi = min(lo, hi), max(lo, hi)
     if cand.shape_log and lo <= 0:
-        return s
+        return None
+    return (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
 
-    proj = projection(prob, fixed, poses) if proj is None else proj
+
+def _refine(prob, fixed, cand, ctx, grid, minima, poses, proj: Projection) -> list[float]:
+    """Refine the shape of each grid index in ``minima`` between its grid neighbours: a
+    bounded Brent search per index (scipy's, step for step: calib.bounded_search), the
+    searches side by side so that their points are evaluated together."""
+    spans = [_interval(cand, grid, i) for i in minima]
+    todo = [span for span in spans if span is not None]
     at = PoseRows.of(ctx, poses)
 
-    def cost(u: float) -> float:
-        v = float(np.exp(u)) if cand.shape_log else u
-        return rss_at(cand, ctx, v, at, proj)
+    def cost(us: list[float]) -> list[float]:
+        return rss_at(cand, ctx, [float(np.exp(u)) if cand.shape_log else u for u in us], at, proj)
 
-    a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
-    from scipy.optimize import minimize_scalar  # lazy: scipy.optimize costs 0.7 s
-
-    res = minimize_scalar(
-        cost, bounds=(a, b), method="bounded", options={"xatol": REFINE_XTOL * abs(b - a) + 1e-15}
-    )
-    return float(np.exp(res.x)) if cand.shape_log else float(res.x)
+    found = iter(minimise_together(cost, todo, [REFINE_XTOL * abs(b - a) + 1e-15 for a, b in todo]))
+    out = []
+    for i, span in zip(minima, spans, strict=True):
+        if span is None:
+            out.append(float(grid[i]))
+        else:
+            u = next(found)
+            out.append(float(np.exp(u)) if cand.shape_log else float(u))
+    return out
 
 
 def choose_shape(
@@ -436,7 +456,7 @@ def choose_shape(
     inner = np.ones(len(rss), bool)
     inner[1:-1] = (rss[1:-1] <= rss[:-2]) & (rss[1:-1] <= rss[2:])
     minima = [i for i in np.argsort(rss) if inner[i]][:N_FINALISTS]
-    finalists = [_refine(prob, fixed, cand, ctx, grid, i, poses, proj) for i in minima]
+    finalists = _refine(prob, fixed, cand, ctx, grid, minima, poses, proj)
     if len(finalists) == 1:
         return finalists[0]
     scores = _inner_cv(prob, fixed, [cand.design(ctx, s) for s in finalists], ctx, poses)

@@ -165,7 +165,10 @@ def test_refinement_cost_is_the_scan_of_one_shape(setup):
             proj = projection(prob, fixed, train)
             for s in grid[:: max(len(grid) // 5, 1)]:
                 one = rss_over_grid(prob, fixed, cand, ctx, [float(s)], train, proj=proj)[0]
-                assert rss_at(cand, ctx, float(s), at, proj) == float(one)
+                assert rss_at(cand, ctx, [float(s)], at, proj) == [float(one)]
+            some = [float(s) for s in grid[:: max(len(grid) // 4, 1)]]
+            alone = [rss_at(cand, ctx, [s], at, proj)[0] for s in some]
+            assert rss_at(cand, ctx, some, at, proj) == alone
 
 
 def test_inner_cross_validation_is_fit_and_heldout_sse_fold_by_fold(setup):
