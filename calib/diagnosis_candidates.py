@@ -83,7 +83,8 @@ class Candidate:
     factors: tuple[float, ...]  # SI value x factor = display value
     offsets: Offsets | None = None
     offsets_many: ManyOffsets | None = None  # the offsets at many shapes in one computation
-    # each parameter offsets one actuator (diagonal offsets): J_act D has one product per value
+    # each parameter offsets one actuator (diagonal offsets): every value of J_act D is then a
+    # single product, whatever the order of the sum, and a batched matrix product forms it
     one_actuator: bool = False
     columns: Columns | None = None
     grid: Grid | None = None  # shape values to scan (None: no shape)
@@ -112,11 +113,14 @@ class Candidate:
         if self.columns is not None:
             x = self.columns(ctx, shape)
             x = x if at.poses is None else x[at.poses]
-        else:
+        elif self.one_actuator:  # one product per value: the poses' rows alone
             assert self.offsets is not None and at.j_act is not None
             o = self.offsets(ctx, shape)
-            o = o if at.poses is None else o[at.poses]
-            x = through_actuators(at.j_act, o, self.one_actuator)
+            x = np.matmul(at.j_act, o if at.poses is None else o[at.poses])
+        else:  # einsum's sums depend on the layout of the operands: all poses, then these
+            assert self.offsets is not None and ctx.j_act is not None
+            x = np.einsum("nra,nak->nrk", ctx.j_act, self.offsets(ctx, shape))
+            x = x if at.poses is None else x[at.poses]
         return x if at.rows is None else x * at.rows
 
     def designs(self, ctx: Context, shapes) -> np.ndarray:
@@ -140,15 +144,6 @@ class Candidate:
     @property
     def regressor(self) -> Offsets | None:  # the former name of the offsets function
         return self.offsets
-
-
-def through_actuators(j_act: np.ndarray, offsets: np.ndarray, one_actuator: bool) -> np.ndarray:
-    """J_act D per pose (N, R, k) from J_act (N, R, A) and the offsets D (N, A, k). Offsets of
-    one actuator per parameter make each value a single product, whatever the order of the
-    sum: one batched matrix product; other offsets are summed in einsum's order, as always."""
-    if one_actuator:
-        return np.matmul(j_act, offsets)
-    return np.einsum("nra,nak->nrk", j_act, offsets)
 
 
 def _diag(values: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -7,8 +7,9 @@ columns X: r ~ G beta + X theta, linearised at the geometric estimate. Sign cons
 
 Nested cross-validation: in every outer training set a candidate's shape (pitch, time
 constant, harmonic, payload) is scanned on a grid by least squares, the best local minima are
-refined, and the finalists are compared by an inner cross-validation of that training set
-only; the outer held-out poses never take part in the choice. Outer folds are contiguous
+refined (bounded Brent searches side by side, calib.bounded_search), and the finalists are
+compared by an inner cross-validation of that training set only; the outer held-out poses
+never take part in the choice. Outer folds are contiguous
 blocks of the measurement order (a drift must predict *later* poses) and random.
 """
 
@@ -422,7 +423,14 @@ def _interval(cand: Candidate, grid: np.ndarray, i: int) -> tuple[float, float] 
     return (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
 
 
-def _refine(prob, fixed, cand, ctx, grid, minima, poses, proj: Projection) -> list[float]:
+def _refine(
+    cand: Candidate,
+    ctx: Context,
+    grid: np.ndarray,
+    minima: list[int],
+    poses: np.ndarray,
+    proj: Projection,
+) -> list[float]:
     """Refine the shape of each grid index in ``minima`` between its grid neighbours: a
     bounded Brent search per index (scipy's, step for step: calib.bounded_search), the
     searches side by side so that their points are evaluated together."""
@@ -456,7 +464,7 @@ def choose_shape(
     inner = np.ones(len(rss), bool)
     inner[1:-1] = (rss[1:-1] <= rss[:-2]) & (rss[1:-1] <= rss[2:])
     minima = [i for i in np.argsort(rss) if inner[i]][:N_FINALISTS]
-    finalists = _refine(prob, fixed, cand, ctx, grid, minima, poses, proj)
+    finalists = _refine(cand, ctx, grid, minima, poses, proj)
     if len(finalists) == 1:
         return finalists[0]
     scores = _inner_cv(prob, fixed, [cand.design(ctx, s) for s in finalists], ctx, poses)

@@ -4,6 +4,8 @@ synthetic problem: the same training RSS at every grid shape to 1e-12."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -26,6 +28,7 @@ from calib.diagnosis_fit import (
     rss_at,
     rss_over_grid,
 )
+from calib.diagnosis_gravity import GravityLoads
 
 N, T, A, P = 60, 3, 6, 12
 
@@ -132,8 +135,23 @@ def test_one_actuator_candidates_move_one_actuator_per_parameter(setup):
     """The flag lets the design take J_act D as one matrix product: it must hold at every
     shape, and the product must then be einsum's sum bit for bit."""
     ctx, _ = setup
-    flagged = [c for c in library(ctx, masses_defaulted=True) if c.one_actuator]
-    assert {c.name for c in flagged} >= {"gain_error", "backlash", "zero_drift", "lead_error"}
+    rng = np.random.default_rng(11)
+    loads = GravityLoads(rng.normal(size=(N, A)), rng.normal(size=(N, A)), 12.0)
+    ctx = dataclasses.replace(ctx, gravity=loads)
+    flagged = [
+        c
+        for defaulted in (True, False)
+        for c in library(ctx, masses_defaulted=defaulted)
+        if c.one_actuator
+    ]
+    assert {c.name for c in flagged} >= {
+        "gain_error",
+        "backlash",
+        "zero_drift",
+        "lead_error",
+        "encoder_eccentricity",
+        "gravity_compliance",
+    }
     for cand in flagged:
         for s in _shaped_grid(cand, ctx)[::7]:
             o = cand.offsets(ctx, float(s))
