@@ -38,6 +38,7 @@ import numpy as np
 from calib.diagnosis_context import Context, approach_direction
 
 Offsets = Callable[[Context, float], np.ndarray]  # (N, A, k) actuator offsets per parameter
+ManyOffsets = Callable[[Context, np.ndarray], np.ndarray]  # (N, S, A, k) at S shapes at once
 Columns = Callable[[Context, float], np.ndarray]  # (N, R, k) identification columns
 Grid = Callable[[Context], np.ndarray]
 
@@ -55,6 +56,24 @@ PHASE_STEP = 1.0  # rad of phase slip over the stroke between neighbouring grid 
 
 
 @dataclass(frozen=True)
+class PoseRows:
+    """Some poses of a context (``poses`` a mask, None: all) with their actuator Jacobians
+    and kept-row weights (R, 1), what a design at those poses reads whatever the shape."""
+
+    poses: np.ndarray | None
+    j_act: np.ndarray | None
+    rows: np.ndarray | None
+
+    @classmethod
+    def of(cls, ctx: Context, poses: np.ndarray | None = None) -> PoseRows:
+        j, rows = ctx.j_act, ctx.rows
+        if poses is not None:
+            j = None if j is None else j[poses]
+            rows = None if rows is None else rows[poses]
+        return cls(poses, j, None if rows is None else rows[:, :, None])
+
+
+@dataclass(frozen=True)
 class Candidate:
     """One family of effects. ``offsets`` (actuator-level) or ``columns`` (direct)."""
 
@@ -63,6 +82,10 @@ class Candidate:
     units: tuple[str, ...]  # display unit of each linear parameter
     factors: tuple[float, ...]  # SI value x factor = display value
     offsets: Offsets | None = None
+    offsets_many: ManyOffsets | None = None  # the offsets at many shapes in one computation
+    # each parameter offsets one actuator (diagonal offsets): every value of J_act D is then a
+    # single product, whatever the order of the sum, and a batched matrix product forms it
+    one_actuator: bool = False
     columns: Columns | None = None
     grid: Grid | None = None  # shape values to scan (None: no shape)
     shape_name: str = ""
@@ -78,14 +101,27 @@ class Candidate:
     def shaped(self) -> bool:
         return self.grid is not None
 
-    def design(self, ctx: Context, shape: float = NO_SHAPE) -> np.ndarray:
-        """Identification columns (N, R, k) at these poses for this shape."""
+    def design(
+        self, ctx: Context, shape: float = NO_SHAPE, poses: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Identification columns (N, R, k) at these poses for this shape; ``poses`` (a mask):
+        only those poses, the values of ``design(ctx, shape)[poses]``."""
+        return self.design_at(ctx, shape, PoseRows.of(ctx, poses))
+
+    def design_at(self, ctx: Context, shape: float, at: PoseRows) -> np.ndarray:
+        """:meth:`design` at the poses of ``at`` (taken once for the shapes of a search)."""
         if self.columns is not None:
             x = self.columns(ctx, shape)
-        else:
+            x = x if at.poses is None else x[at.poses]
+        elif self.one_actuator:  # one product per value: the poses' rows alone
+            assert self.offsets is not None and at.j_act is not None
+            o = self.offsets(ctx, shape)
+            x = np.matmul(at.j_act, o if at.poses is None else o[at.poses])
+        else:  # einsum's sums depend on the layout of the operands: all poses, then these
             assert self.offsets is not None and ctx.j_act is not None
             x = np.einsum("nra,nak->nrk", ctx.j_act, self.offsets(ctx, shape))
-        return x if ctx.rows is None else x * ctx.rows[:, :, None]
+            x = x if at.poses is None else x[at.poses]
+        return x if at.rows is None else x * at.rows
 
     def designs(self, ctx: Context, shapes) -> np.ndarray:
         """Identification columns (N, S, R, k) at these poses for each of ``shapes``: the
@@ -93,10 +129,17 @@ class Candidate:
         if self.columns is not None:
             x = np.stack([self.columns(ctx, float(s)) for s in shapes], axis=1)
         else:
-            assert self.offsets is not None and ctx.j_act is not None
-            o = np.stack([self.offsets(ctx, float(s)) for s in shapes], axis=1)  # (N, S, A, k)
-            x = np.matmul(ctx.j_act[:, None], o)
+            assert ctx.j_act is not None
+            x = np.matmul(ctx.j_act[:, None], self.offsets_at(ctx, shapes))
         return x if ctx.rows is None else x * ctx.rows[:, None, :, None]
+
+    def offsets_at(self, ctx: Context, shapes) -> np.ndarray:
+        """Actuator offsets (N, S, A, k) at each of ``shapes``: the values of :attr:`offsets`
+        shape by shape (from :attr:`offsets_many` at once when the candidate has it)."""
+        assert self.offsets is not None
+        if self.offsets_many is not None:
+            return self.offsets_many(ctx, np.asarray(shapes, dtype=float))
+        return np.stack([self.offsets(ctx, float(s)) for s in shapes], axis=1)
 
     @property
     def regressor(self) -> Offsets | None:  # the former name of the offsets function
@@ -145,16 +188,27 @@ def _gain(ctx: Context, shape: float) -> np.ndarray:
 
 
 def _lead(ctx: Context, pitch: float) -> np.ndarray:
-    phase = 2 * np.pi * ctx.commands / pitch
-    return np.concatenate(
-        [_diag(np.sin(phase), ctx.is_slide), _diag(np.cos(phase), ctx.is_slide)], 2
-    )
+    return _sin_cos(2 * np.pi * ctx.commands / pitch, ctx.is_slide)
+
+
+def _lead_many(ctx: Context, pitches: np.ndarray) -> np.ndarray:
+    """:func:`_lead` at every pitch (N, S, A, k): the same phases, element by element."""
+    return _sin_cos((2 * np.pi * ctx.commands)[:, None, :] / pitches[None, :, None], ctx.is_slide)
 
 
 def _eccentricity(ctx: Context, harmonic: float) -> np.ndarray:
-    hinge = ~ctx.is_slide
-    phase = harmonic * ctx.commands
-    return np.concatenate([_diag(np.sin(phase), hinge), _diag(np.cos(phase), hinge)], 2)
+    return _sin_cos(harmonic * ctx.commands, ~ctx.is_slide)
+
+
+def _sin_cos(phase: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(..., A) phases -> (..., A, 2m) offsets: sin of each masked actuator's phase, then cos
+    (``concatenate([_diag(sin), _diag(cos)])`` written into one array)."""
+    idx = np.flatnonzero(mask)
+    out = np.zeros((*phase.shape, 2 * len(idx)))
+    cols = np.arange(len(idx))
+    out[..., idx, cols] = np.sin(phase[..., idx])
+    out[..., idx, len(idx) + cols] = np.cos(phase[..., idx])
+    return out
 
 
 def _backlash(ctx: Context, shape: float) -> np.ndarray:
@@ -232,6 +286,7 @@ def default_candidates(
             ("ppm",) * len(a),
             (1e6,) * len(a),
             offsets=_gain,
+            one_actuator=True,
             explains="command",
         ),
         Candidate(
@@ -240,6 +295,7 @@ def default_candidates(
             unit,
             fac,
             offsets=_backlash,
+            one_actuator=True,
             nonnegative=(True,) * len(a),
             physics="a negative play (the actuator leading its command)",
             explains="approach direction",
@@ -250,6 +306,7 @@ def default_candidates(
             tuple(f"{u}/{time_unit}" for u in unit),
             fac,
             offsets=_zero_drift,
+            one_actuator=True,
             grid=_tau_grid,
             shape_name="time_constant",
             shape_unit=time_unit,
@@ -278,6 +335,8 @@ def default_candidates(
                 ("mm",) * (2 * len(sl)),
                 lead_fac,
                 offsets=_lead,
+                one_actuator=True,
+                offsets_many=_lead_many,
                 grid=_pitch_grid,
                 shape_name="pitch",
                 shape_unit="mm",
@@ -293,6 +352,7 @@ def default_candidates(
                 ("deg",) * (2 * len(rv)),
                 (float(np.degrees(1.0)),) * (2 * len(rv)),
                 offsets=_eccentricity,
+                one_actuator=True,
                 grid=lambda ctx: np.array([1.0, 2.0]),
                 shape_name="harmonic",
                 shape_unit="per revolution",
@@ -307,6 +367,7 @@ def default_candidates(
                 tuple(("mm/kN kg" if s else "deg/(kN m) kg") for s in slide),
                 tuple(f * 1e3 for f in fac),
                 offsets=_gravity_payload,
+                one_actuator=True,
                 nonnegative=(True,) * len(a),
                 physics="a negative compliance (an actuator lengthening under its load)",
                 explains="gravity load",
@@ -321,6 +382,7 @@ def default_candidates(
                 tuple(("mm/kN" if s else "deg/(kN m)") for s in slide),
                 tuple(f * 1e3 for f in fac),
                 offsets=_gravity,
+                one_actuator=True,
                 grid=_payload_grid,
                 shape_name="payload",
                 shape_unit="kg",

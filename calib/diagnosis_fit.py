@@ -7,18 +7,21 @@ columns X: r ~ G beta + X theta, linearised at the geometric estimate. Sign cons
 
 Nested cross-validation: in every outer training set a candidate's shape (pitch, time
 constant, harmonic, payload) is scanned on a grid by least squares, the best local minima are
-refined, and the finalists are compared by an inner cross-validation of that training set
-only; the outer held-out poses never take part in the choice. Outer folds are contiguous
+refined (bounded Brent searches side by side, calib.bounded_search), and the finalists are
+compared by an inner cross-validation of that training set only; the outer held-out poses
+never take part in the choice. Outer folds are contiguous
 blocks of the measurement order (a drift must predict *later* poses) and random.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from calib.diagnosis_candidates import NO_SHAPE, Candidate
+from calib.bounded_search import minimise_together
+from calib.diagnosis_candidates import NO_SHAPE, Candidate, PoseRows
 from calib.diagnosis_context import Context
 
 SCHEMES = ("blocked", "random")
@@ -85,6 +88,15 @@ class Problem:
         """The residual of these poses, flat (the second part of :meth:`rows`)."""
         return self.r[poses].reshape(-1)
 
+    def projected_residual(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(r, r - Q Q^T r) of these poses' residual rows, cached with the basis."""
+        key = ("rp", np.asarray(poses, bool).tobytes())
+        if key not in self._cache:
+            q, _ = self.basis(poses)
+            rt = self.residual_rows(poses)
+            self._cache[key] = (rt, rt - q @ (q.T @ rt))
+        return self._cache[key]
+
     def basis(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Q, G^+) of the geometric columns of these poses."""
         key = np.asarray(poses, bool).tobytes()
@@ -114,20 +126,33 @@ def fit(
 ) -> Fit:
     """Least squares of r by G beta + X theta on ``poses``; ``lower`` bounds theta below."""
     q, gplus = prob.basis(poses)
-    rt = prob.residual_rows(poses)
+    rt, rp = prob.projected_residual(poses)
     k = sum(x.shape[2] for x in xs)
     if k == 0:
         return Fit(np.zeros(0), gplus @ rt)
-    xt = _flat(xs, poses).reshape(len(rt), k)
+    return _solve(q, gplus, rt, rp, _flat(xs, poses).reshape(len(rt), k), lower)
+
+
+def _solve(
+    q: np.ndarray,
+    gplus: np.ndarray,
+    rt: np.ndarray,
+    rp: np.ndarray,
+    xt: np.ndarray,
+    lower: np.ndarray | None = None,
+) -> Fit:
+    """:func:`fit` from the training set's basis ``q``, ``gplus``, residual ``rt`` and its
+    projection ``rp``, and the candidates' columns ``xt`` (rows, k)."""
+    k = xt.shape[1]
     xp = xt - q @ (q.T @ xt)
-    rp = rt - q @ (q.T @ rt)
-    scale = np.linalg.norm(xp, axis=0)
+    scale = np.sqrt(np.add.reduce(xp * xp, axis=0))  # np.linalg.norm(xp, axis=0)'s arithmetic
     # a column the data does not see (a joint no load reaches, a harmonic of a joint that
     # did not turn, or one the geometry spans): its parameter stays 0, not 1 / 0
     live = scale > RCOND * max(float(scale.max(initial=0.0)), 1e-300)
     theta = np.zeros(k)
     if np.any(live):
-        a, sc = xp[:, live] / scale[live], scale[live]
+        # every column seen (the usual case): the columns themselves, not a copy of them
+        a, sc = (xp / scale, scale) if live.all() else (xp[:, live] / scale[live], scale[live])
         if lower is not None and np.any(np.isfinite(lower[live])):
             from scipy.optimize import lsq_linear  # lazy: scipy.optimize costs 0.7 s
 
@@ -140,9 +165,16 @@ def fit(
 
 def heldout_sse(prob: Problem, xs: list[np.ndarray], f: Fit, poses: np.ndarray) -> np.ndarray:
     """Per-pose sum of squared residuals on ``poses`` after the fit ``f``."""
-    e = prob.r[poses] - prob.geo[poses] @ f.beta
-    if xs:
-        e = e - np.concatenate([x[poses] for x in xs], axis=2) @ f.theta
+    xv = np.concatenate([x[poses] for x in xs], axis=2) if xs else None
+    return _sse(prob.r[poses], prob.geo[poses], xv, f)
+
+
+def _sse(r: np.ndarray, geo: np.ndarray, x: np.ndarray | None, f: Fit) -> np.ndarray:
+    """:func:`heldout_sse` from the poses' residual ``r`` (n, R), geometric columns ``geo``
+    (n, R, p) and candidates' columns ``x`` (n, R, k) or None."""
+    e = r - geo @ f.beta
+    if x is not None:
+        e = e - x @ f.theta
     return np.sum(e**2, axis=1)
 
 
@@ -200,9 +232,7 @@ def grid_offsets(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridOffs
         grid = np.asarray(grid, dtype=float)
         chunks = []
         for lo in range(0, len(grid), GRID_CHUNK):
-            chunks.append(
-                np.stack([cand.offsets(ctx, float(v)) for v in grid[lo : lo + GRID_CHUNK]], axis=1)
-            )  # (N, s, A, k)
+            chunks.append(cand.offsets_at(ctx, grid[lo : lo + GRID_CHUNK]))  # (N, s, A, k)
         used = np.zeros(chunks[0].shape[2:], bool)
         for oc in chunks:
             used |= np.any(oc != 0, axis=(0, 1))
@@ -228,15 +258,13 @@ class Projection:
 def projection(prob: Problem, fixed: list[np.ndarray], poses: np.ndarray) -> Projection:
     """What :func:`rss_over_grid` needs of the poses and ``fixed``, whatever the shape: one
     computation serves the grid scan and every refinement of one candidate's shape."""
-    rt = prob.residual_rows(poses)
     q0, _ = prob.basis(poses)
+    rt, rp = prob.projected_residual(poses)
     if fixed:
         xf = _flat(fixed, poses).reshape(len(rt), -1)
         q = _orth(np.hstack([q0, xf - q0 @ (q0.T @ xf)]))
-    else:
-        q = q0
-    rp = rt - q @ (q.T @ rt)
-    return Projection(q, rp, float(rp @ rp), len(rt))
+        rp = rt - q @ (q.T @ rt)
+    return Projection(q0 if not fixed else q, rp, float(rp @ rp), len(rt))
 
 
 def rss_over_grid(
@@ -265,12 +293,29 @@ def rss_over_grid(
     return out
 
 
+def rss_at(
+    cand: Candidate, ctx: Context, shapes: list[float], at: PoseRows, proj: Projection
+) -> list[float]:
+    """``rss_over_grid(..., [shape], poses, proj=proj)[0]`` at each of ``shapes`` for the
+    poses of ``at``: the same arithmetic shape by shape (a matrix product or solve of a stack
+    is the product or solve of each of its items), one stack for the points of the
+    refinements running side by side."""
+    x = np.stack([cand.design_at(ctx, float(v), at) for v in shapes])
+    ata, atb = _normal_equations_of(x.reshape(len(shapes), proj.m, -1), proj)
+    return [float(proj.base - e) for e in _explained(ata, atb, each_alone=True)]
+
+
 def _normal_equations(
     cand: Candidate, ctx: Context, grid, poses: np.ndarray, proj: Projection
 ) -> tuple[np.ndarray, np.ndarray]:
     """X^T (I - Q Q^T) X (S, k, k) and X^T rp (S, k) at each shape, from the designs."""
-    x = np.stack([cand.design(ctx, float(v))[poses] for v in grid])
-    x = x.reshape(len(grid), proj.m, -1)  # (S, m, k)
+    at = PoseRows.of(ctx, poses)
+    x = np.stack([cand.design_at(ctx, float(v), at) for v in grid])
+    return _normal_equations_of(x.reshape(len(grid), proj.m, -1), proj)
+
+
+def _normal_equations_of(x: np.ndarray, proj: Projection) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_normal_equations` from the columns ``x`` (S, m, k) of the training rows."""
     qx = np.matmul(proj.q.T, x)  # (S, r, k)
     ata = np.matmul(x.transpose(0, 2, 1), x) - np.matmul(qx.transpose(0, 2, 1), qx)
     atb = np.matmul(x.transpose(0, 2, 1), proj.rp)  # rp is orthogonal to q already
@@ -314,58 +359,97 @@ def _normal_equations_offsets(
     m = np.matmul(g.j.transpose(0, 2, 1), g.j) * np.asarray(poses, float)[:, None, None]
     pick = np.zeros((g.k, len(g.act)))  # parameter <- pair
     pick[g.col, np.arange(len(g.act))] = 1.0
+    # every parameter from exactly one pair (diagonal offsets): the sums over pairs below
+    # have one term, so taking that term is the same number
+    sel = np.argsort(g.col) if np.array_equal(np.sort(g.col), np.arange(g.k)) else None
     qx = np.matmul(w[:, :, g.act].transpose(2, 1, 0), g.o)  # (P, r, S)
-    qx = np.tensordot(pick, qx, axes=1)  # (k, r, S)
+    qx = qx[sel] if sel is not None else np.tensordot(pick, qx, axes=1)  # (k, r, S)
     n_pairs = len(g.act)
     gram = np.empty((n_pairs, n_pairs, g.o.shape[2]))
     for a in range(n_pairs):
         for b in range(a, n_pairs):
             gram[a, b] = gram[b, a] = (g.o[a] * g.o[b]).T @ m[:, g.act[a], g.act[b]]
-    xtx = np.einsum("ip,pqs,jq->sij", pick, gram, pick)
+    if sel is not None:
+        xtx = gram[sel][:, sel].transpose(2, 0, 1)
+    else:
+        xtx = np.einsum("ip,pqs,jq->sij", pick, gram, pick)
     qxs = qx.transpose(2, 0, 1)  # (S, k, r)
     ata = xtx - np.matmul(qxs, qxs.transpose(0, 2, 1))
-    atb = (pick @ np.matmul(c[:, g.act].T[:, None, :], g.o)[:, 0, :]).T  # (S, k)
+    cx = np.matmul(c[:, g.act].T[:, None, :], g.o)[:, 0, :]  # (P, S)
+    atb = (cx[sel] if sel is not None else pick @ cx).T  # (S, k)
     return ata, atb
 
 
-def _explained(ata: np.ndarray, atb: np.ndarray) -> np.ndarray:
-    """b^T A^-1 b at each shape, on the column-normalised normal equations."""
-    d = np.sqrt(np.clip(np.einsum("skk->sk", ata), 0, None))
+@functools.cache
+def _ridge(k: int) -> np.ndarray:
+    """The ridge added to the normalised normal equations (1, k, k)."""
+    ridge = RCOND * np.eye(k)[None] * 1e2
+    ridge.flags.writeable = False
+    return ridge
+
+
+def _explained(ata: np.ndarray, atb: np.ndarray, each_alone: bool = False) -> np.ndarray:
+    """b^T A^-1 b at each shape, on the column-normalised normal equations. A singular
+    system makes the whole stack use the pseudo-inverse; ``each_alone``: only that shape
+    (each value then what the shape alone gives)."""
+    d = np.sqrt(np.maximum(np.einsum("skk->sk", ata), 0.0))
     d[d < 1e-300] = 1.0
     a_n = ata / d[:, :, None] / d[:, None, :]
     b_n = atb / d
-    k = a_n.shape[1]
-    a_n = a_n + RCOND * np.eye(k)[None] * 1e2
+    a_n = a_n + _ridge(a_n.shape[1])
     try:
         sol = np.linalg.solve(a_n, b_n[:, :, None])[:, :, 0]
     except np.linalg.LinAlgError:
+        if each_alone and len(ata) > 1:
+            return np.concatenate(
+                [_explained(ata[i : i + 1], atb[i : i + 1]) for i in range(len(ata))]
+            )
         sol = np.einsum("sij,sj->si", np.linalg.pinv(a_n), b_n)
     return np.einsum("sk,sk->s", b_n, sol)
 
 
-def _refine(prob, fixed, cand, ctx, grid, i, poses, proj: Projection | None = None) -> float:
-    """Refine the shape between the grid neighbours of index ``i``."""
+def _interval(cand: Candidate, grid: np.ndarray, i: int) -> tuple[float, float] | None:
+    """Where the shape at grid index ``i`` is refined: between its grid neighbours (their
+    logarithms for a log-scaled shape); None: the grid value stays."""
     s = float(grid[i])
     if cand.shape_name == "harmonic" or not np.isfinite(s) or len(grid) < 3:
-        return s
+        return None
     lo, hi = float(grid[max(i - 1, 0)]), float(grid[min(i + 1, len(grid) - 1)])
     if not (np.isfinite(lo) and np.isfinite(hi)):
-        return s
+        return None
     lo, hi = min(lo, hi), max(lo, hi)
     if cand.shape_log and lo <= 0:
-        return s
+        return None
+    return (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
 
-    def cost(u: float) -> float:
-        v = float(np.exp(u)) if cand.shape_log else u
-        return float(rss_over_grid(prob, fixed, cand, ctx, [v], poses, proj=proj)[0])
 
-    a, b = (np.log(lo), np.log(hi)) if cand.shape_log else (lo, hi)
-    from scipy.optimize import minimize_scalar  # lazy: scipy.optimize costs 0.7 s
+def _refine(
+    cand: Candidate,
+    ctx: Context,
+    grid: np.ndarray,
+    minima: list[int],
+    poses: np.ndarray,
+    proj: Projection,
+) -> list[float]:
+    """Refine the shape of each grid index in ``minima`` between its grid neighbours: a
+    bounded Brent search per index (scipy's, step for step: calib.bounded_search), the
+    searches side by side so that their points are evaluated together."""
+    spans = [_interval(cand, grid, i) for i in minima]
+    todo = [span for span in spans if span is not None]
+    at = PoseRows.of(ctx, poses)
 
-    res = minimize_scalar(
-        cost, bounds=(a, b), method="bounded", options={"xatol": REFINE_XTOL * abs(b - a) + 1e-15}
-    )
-    return float(np.exp(res.x)) if cand.shape_log else float(res.x)
+    def cost(us: list[float]) -> list[float]:
+        return rss_at(cand, ctx, [float(np.exp(u)) if cand.shape_log else u for u in us], at, proj)
+
+    found = iter(minimise_together(cost, todo, [REFINE_XTOL * abs(b - a) + 1e-15 for a, b in todo]))
+    out = []
+    for i, span in zip(minima, spans, strict=True):
+        if span is None:
+            out.append(float(grid[i]))
+        else:
+            u = next(found)
+            out.append(float(np.exp(u)) if cand.shape_log else float(u))
+    return out
 
 
 def choose_shape(
@@ -380,24 +464,39 @@ def choose_shape(
     inner = np.ones(len(rss), bool)
     inner[1:-1] = (rss[1:-1] <= rss[:-2]) & (rss[1:-1] <= rss[2:])
     minima = [i for i in np.argsort(rss) if inner[i]][:N_FINALISTS]
-    finalists = [_refine(prob, fixed, cand, ctx, grid, i, poses, proj) for i in minima]
+    finalists = _refine(cand, ctx, grid, minima, poses, proj)
     if len(finalists) == 1:
         return finalists[0]
+    scores = _inner_cv(prob, fixed, [cand.design(ctx, s) for s in finalists], ctx, poses)
+    return finalists[int(np.argmin(scores))]
+
+
+def _inner_cv(
+    prob: Problem, fixed: list[np.ndarray], xs: list[np.ndarray], ctx: Context, poses: np.ndarray
+) -> list[float]:
+    """Held-out SSE of geometry + ``fixed`` + each of the columns ``xs`` (one candidate at
+    its finalist shapes) by an inner cross-validation of ``poses``: per finalist, the sum over
+    the folds of :func:`heldout_sse` after :func:`fit`, with what does not depend on the
+    finalist (the fold's basis, residual and fixed columns) taken once per fold."""
     idx = np.flatnonzero(poses)
     labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
-    scores = []
-    for s in finalists:
-        x = cand.design(ctx, s)
-        sse = 0.0
-        for f in range(INNER_FOLDS):
-            train = np.zeros_like(poses)
-            train[idx[labels != f]] = True
-            test = np.zeros_like(poses)
-            test[idx[labels == f]] = True
-            ft = fit(prob, [*fixed, x], train)
-            sse += float(np.sum(heldout_sse(prob, [*fixed, x], ft, test)))
-        scores.append(sse)
-    return finalists[int(np.argmin(scores))]
+    scores = [0.0] * len(xs)
+    for f in range(INNER_FOLDS):
+        train = np.zeros_like(poses)
+        train[idx[labels != f]] = True
+        test = np.zeros_like(poses)
+        test[idx[labels == f]] = True
+        q, gplus = prob.basis(train)
+        rt, rp = prob.projected_residual(train)
+        r_test, geo_test = prob.r[test], prob.geo[test]
+        fixed_train = [x[train] for x in fixed]
+        fixed_test = [x[test] for x in fixed]
+        for i, x in enumerate(xs):
+            xt = np.concatenate([*fixed_train, x[train]], axis=2).reshape(len(rt), -1)
+            ft = _solve(q, gplus, rt, rp, xt)
+            xv = np.concatenate([*fixed_test, x[test]], axis=2)
+            scores[i] += float(np.sum(_sse(r_test, geo_test, xv, ft)))
+    return scores
 
 
 def lower_bounds(cands: list[Candidate], xs: list[np.ndarray]) -> np.ndarray | None:

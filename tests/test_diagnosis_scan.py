@@ -4,23 +4,31 @@ synthetic problem: the same training RSS at every grid shape to 1e-12."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from calib.diagnosis_candidates import library
+from calib.diagnosis_candidates import PoseRows, library
 from calib.diagnosis_context import Context
 from calib.diagnosis_fit import (
+    INNER_FOLDS,
     RCOND,
     Problem,
     _explained,
+    _inner_cv,
     _normal_equations_offsets,
     _orth,
+    fit,
     fold_labels,
     grid_offsets,
+    heldout_sse,
     orth_and_pinv,
     projection,
+    rss_at,
     rss_over_grid,
 )
+from calib.diagnosis_gravity import GravityLoads
 
 N, T, A, P = 60, 3, 6, 12
 
@@ -107,3 +115,98 @@ def test_factored_scan_of_actuator_offsets_matches_the_reference(setup):
                 fast = proj.base - _explained(ata[some], atb[some])
                 ref = rss_over_grid(prob, fixed, cand, ctx, grid[some], train, proj=proj)
                 np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * proj.base)
+
+
+def _shaped_grid(cand, ctx):
+    return np.asarray(cand.grid(ctx), dtype=float) if cand.shaped else np.array([np.nan])
+
+
+def test_offsets_of_many_shapes_are_the_offsets_of_each(setup):
+    ctx, _ = setup
+    for cand in library(ctx, masses_defaulted=True):
+        if cand.offsets is None:
+            continue
+        grid = _shaped_grid(cand, ctx)[:100]
+        each = np.stack([cand.offsets(ctx, float(s)) for s in grid], axis=1)
+        np.testing.assert_array_equal(cand.offsets_at(ctx, grid), each)
+
+
+def test_one_actuator_candidates_move_one_actuator_per_parameter(setup):
+    """The flag lets the design take J_act D as one matrix product: it must hold at every
+    shape, and the product must then be einsum's sum bit for bit."""
+    ctx, _ = setup
+    rng = np.random.default_rng(11)
+    loads = GravityLoads(rng.normal(size=(N, A)), rng.normal(size=(N, A)), 12.0)
+    ctx = dataclasses.replace(ctx, gravity=loads)
+    flagged = [
+        c
+        for defaulted in (True, False)
+        for c in library(ctx, masses_defaulted=defaulted)
+        if c.one_actuator
+    ]
+    assert {c.name for c in flagged} >= {
+        "gain_error",
+        "backlash",
+        "zero_drift",
+        "lead_error",
+        "encoder_eccentricity",
+        "gravity_compliance",
+    }
+    for cand in flagged:
+        for s in _shaped_grid(cand, ctx)[::7]:
+            o = cand.offsets(ctx, float(s))
+            assert np.count_nonzero(o, axis=1).max() <= 1, cand.name
+            ref = np.einsum("nra,nak->nrk", ctx.j_act, o) * ctx.rows[:, :, None]
+            np.testing.assert_array_equal(cand.design(ctx, float(s)), ref)
+
+
+def test_design_at_some_poses_is_the_design_of_those_poses(setup):
+    ctx, _ = setup
+    poses = fold_labels(ctx.time, 5, "random") != 2
+    for cand in library(ctx, masses_defaulted=True):
+        for s in _shaped_grid(cand, ctx)[:3]:
+            full = cand.design(ctx, float(s))
+            np.testing.assert_array_equal(cand.design(ctx, float(s), poses), full[poses])
+
+
+def test_refinement_cost_is_the_scan_of_one_shape(setup):
+    """rss_at (the refinement's cost) and rss_over_grid at one shape: the same arithmetic, so
+    the same number bit for bit (the refined shapes follow every bit of this cost)."""
+    ctx, prob = setup
+    cands = library(ctx, masses_defaulted=True)
+    backlash = next(c for c in cands if c.name == "backlash").design(ctx)
+    train = fold_labels(ctx.time, 5, "blocked") != 1
+    at = PoseRows.of(ctx, train)
+    for cand in (c for c in cands if c.shaped):
+        grid = _shaped_grid(cand, ctx)
+        for fixed in ([], [backlash]):
+            proj = projection(prob, fixed, train)
+            for s in grid[:: max(len(grid) // 5, 1)]:
+                one = rss_over_grid(prob, fixed, cand, ctx, [float(s)], train, proj=proj)[0]
+                assert rss_at(cand, ctx, [float(s)], at, proj) == [float(one)]
+            some = [float(s) for s in grid[:: max(len(grid) // 4, 1)]]
+            alone = [rss_at(cand, ctx, [s], at, proj)[0] for s in some]
+            assert rss_at(cand, ctx, some, at, proj) == alone
+
+
+def test_inner_cross_validation_is_fit_and_heldout_sse_fold_by_fold(setup):
+    ctx, prob = setup
+    cands = library(ctx, masses_defaulted=True)
+    backlash = next(c for c in cands if c.name == "backlash").design(ctx)
+    lead = next(c for c in cands if c.name == "lead_error")
+    xs = [lead.design(ctx, s) for s in (4e-3, 7e-3, 11e-3)]
+    poses = fold_labels(ctx.time, 5, "random") != 0
+    idx = np.flatnonzero(poses)
+    labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
+    for fixed in ([], [backlash]):
+        ref = []
+        for x in xs:
+            sse = 0.0
+            for f in range(INNER_FOLDS):
+                train, test = np.zeros_like(poses), np.zeros_like(poses)
+                train[idx[labels != f]] = True
+                test[idx[labels == f]] = True
+                ft = fit(prob, [*fixed, x], train)
+                sse += float(np.sum(heldout_sse(prob, [*fixed, x], ft, test)))
+            ref.append(sse)
+        assert _inner_cv(prob, fixed, xs, ctx, poses) == ref
