@@ -17,19 +17,28 @@ from twin.workspace import random_poses
 ROOT = Path(__file__).resolve().parent.parent
 
 
-@pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher", "arm6r_3targets"])
-def test_batch_equals_per_pose(name):
+MACHINES = ["hexapod_rrrprr", "polisher", "arm6r_3targets"]
+
+
+def _machine(name: str, n: int, seed: int, spread: float, reach: float):
+    """Nominal machine, error model, values uniform in +-spread, the injected machine and n
+    closed poses (a serial arm's commands uniform over ``reach`` of each range)."""
     nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
     params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
-    rng = np.random.default_rng(0)
-    values = rng.uniform(-1e-3, 1e-3, len(params))
+    rng = np.random.default_rng(seed)
+    values = rng.uniform(-spread, spread, len(params))
     mech = nominal.with_model(params.inject(nominal.model, values))
     if nominal.is_serial:
         lo, hi = nominal.actuator_range.T
-        commands = rng.uniform(0.5 * lo, 0.5 * hi, (20, nominal.n_actuators))
+        commands = rng.uniform(reach * lo, reach * hi, (n, nominal.n_actuators))
     else:
-        _, commands = random_poses(nominal, 20, rng)
-    qpos = forward_batch(mech, commands).qpos
+        _, commands = random_poses(nominal, n, rng)
+    return nominal, params, values, mech, forward_batch(mech, commands).qpos
+
+
+@pytest.mark.parametrize("name", MACHINES)
+def test_batch_equals_per_pose(name):
+    nominal, params, values, mech, qpos = _machine(name, 20, 0, 1e-3, 0.5)
     per_pose = np.vstack([target_jacobian(mech, params, values, q) for q in qpos])
     batch = target_jacobian_batch(mech, params, values, qpos, JacobianPlan.for_mechanism(nominal))
     assert batch.shape == per_pose.shape == (20 * nominal.n_targets * 3, len(params))
@@ -37,23 +46,13 @@ def test_batch_equals_per_pose(name):
     assert np.abs(per_pose).max() > 0.1  # not a vacuous comparison
 
 
-@pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher", "arm6r_3targets"])
+@pytest.mark.parametrize("name", MACHINES)
 def test_compiled_kernel_equals_numpy_path(name, monkeypatch):
     """The compiled kernel (frames, screws, explicit and implicit terms pose by pose) and
     the numpy path (arrays over poses) give one Jacobian to round-off."""
     from twin import sensitivity_batch
 
-    nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
-    params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
-    rng = np.random.default_rng(5)
-    values = rng.uniform(-2e-3, 2e-3, len(params))
-    mech = nominal.with_model(params.inject(nominal.model, values))
-    if nominal.is_serial:
-        lo, hi = nominal.actuator_range.T
-        commands = rng.uniform(0.8 * lo, 0.8 * hi, (70, nominal.n_actuators))
-    else:
-        _, commands = random_poses(nominal, 70, rng)
-    qpos = forward_batch(mech, commands).qpos
+    _, params, values, mech, qpos = _machine(name, 70, 5, 2e-3, 0.8)
     compiled = target_jacobian_batch(mech, params, values, qpos)
     monkeypatch.setattr(sensitivity_batch, "COMPILED", False)
     numpy_path = target_jacobian_batch(mech, params, values, qpos)
