@@ -246,7 +246,11 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
 
         def jacobian(z: np.ndarray, pred: Prediction, geo: np.ndarray | None = None) -> np.ndarray:
             x, _ = split(z)
-            jac = -(model.jacobian(x, pred) if geo is None else geo)[:, free]
+            if geo is None and k == n:  # a new array of every column: negated in place
+                jac = model.jacobian(x, pred)
+                np.negative(jac, out=jac)
+            else:
+                jac = -(model.jacobian(x, pred) if geo is None else geo)[:, free]
             if reg0 is not None:
                 jac = np.hstack([jac, registration_jacobian(reg0, z[k:], measured)])
             jac = jac if rows is None else jac[rows]
