@@ -132,3 +132,62 @@ def test_a_failing_write_keeps_the_existing_file(tmp_path, monkeypatch):
         figures.error_map_png(path, "second", _grid(), np.ones(49), "e (mm)")
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.png"]  # no temporary left
+
+
+def _pixels(path: Path) -> np.ndarray:
+    return mpimg.imread(path)
+
+
+def test_save_pngs_frames_equal_full_draws(tmp_path):
+    """Each frame drawn over the shared background is the picture a full draw (savefig) of
+    the figure in that frame's state gives, pixel for pixel."""
+    fig, axes = figures.plt.subplots(1, 2, figsize=(5, 2.5))
+    images = [ax.imshow(np.zeros((4, 5)), vmin=0) for ax in axes]
+    heading = fig.suptitle("")
+    changed = [heading, *images, *(s for ax in axes for s in ax.spines.values())]
+    changed += [ax.title for ax in axes]
+    rng = np.random.default_rng(2)
+
+    def frames():
+        for k in range(3):
+            for i, (ax, image) in enumerate(zip(axes, images, strict=True)):
+                image.set_data(rng.random((4, 5)))
+                image.set_clim(0, 1 + k)
+                ax.set_title(f"panel {i}\nframe {k}", fontsize=7, y=1.0)
+            heading.set_text(f"frame {k}")
+            yield tmp_path / f"frame{k}.png", changed
+            for artist in changed:  # a figure's draw leaves out animated artists, even saving
+                artist.set_animated(False)
+            fig.savefig(tmp_path / f"full{k}.png", dpi=figures.DPI)  # the frame's state, whole
+
+    written = figures.save_pngs(fig, frames())
+    assert written == [tmp_path / f"frame{k}.png" for k in range(3)]
+    for k in range(3):
+        a, b = _pixels(tmp_path / f"frame{k}.png"), _pixels(tmp_path / f"full{k}.png")
+        assert a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
+    assert _pixels(tmp_path / "frame0.png").tolist() != _pixels(tmp_path / "frame1.png").tolist()
+
+
+def test_parameter_bars_pngs_equal_one_chart_at_a_time(tmp_path):
+    """Several charts of one figure (the names drawn once) are the charts drawn alone."""
+    rng = np.random.default_rng(3)
+    names = [f"limb{k // 9 + 1}.j{k % 9}.dx" for k in range(30)]
+    charts = [
+        figures.Bars(
+            tmp_path / "a.png", "first", rng.normal(0, 1, 30), np.abs(rng.normal(0, 0.2, 30))
+        ),
+        figures.Bars(
+            tmp_path / "b.png", "second, wider", rng.normal(0, 9, 30), None, rng.normal(0, 9, 30)
+        ),
+        figures.Bars(tmp_path / "c.png", "third", np.abs(rng.normal(0, 1, 30)), np.full(30, 0.1)),
+    ]
+    assert figures.parameter_bars_pngs(names, charts, "mm") == [c.path for c in charts]
+    for c in charts:
+        alone = tmp_path / f"alone_{c.path.name}"
+        figures.parameter_bars_png(alone, c.title, names, c.estimates, c.std, c.truth, "mm")
+        np.testing.assert_array_equal(_pixels(c.path), _pixels(alone))
+    with pytest.raises(ValueError, match="30 parameter names"):
+        figures.parameter_bars_pngs(names, [charts[0], charts[1]._replace(estimates=np.ones(3))])
+    assert not (tmp_path / "x.png").exists()
+    _no_leftovers(tmp_path)
