@@ -272,6 +272,7 @@ def parameter_bars_pngs(
 
     def frames() -> Iterator[Frame]:
         drawn: list = []
+        drawn_before = False
         for c in charts:
             for old in drawn:  # the previous chart's bars, error bars, markers and zero line
                 old.remove()
@@ -284,9 +285,13 @@ def parameter_bars_pngs(
             if c.truth is not None:
                 drawn += ax.plot(c.truth, y, "D", color="#e45756", markersize=3.5, label="truth")
             drawn.append(ax.axvline(0.0, color="#999999", linewidth=0.6))
-            ax.relim()  # the x limits of this chart alone
-            ax.autoscale_view()
-            ax.set_title(c.title, fontsize=10)
+            if drawn_before:  # the x limits of this chart alone (the first: the fresh axes')
+                ax.relim()
+                ax.autoscale_view()
+            drawn_before = True
+            # y given: where the title would be placed anyway (no tick labels on top), without
+            # measuring every name for it
+            ax.set_title(c.title, fontsize=10, y=1.0)
             ax.legend(fontsize=7, loc="best")
             # all but the names' column (and the axes' background) changes from chart to chart
             yield c.path, [a for a in ax.get_children() if a not in (ax.patch, ax.yaxis)]
