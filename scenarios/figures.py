@@ -56,13 +56,15 @@ def save_pngs(fig: plt.Figure, frames: Iterable[Frame], close: bool = True) -> l
     then its children by z-order, axes recursed into). The picture is that of a full draw as
     long as the changed artists move none of the others (limits, aspect and layout stay) and
     none of the others is drawn over a changed one (keep spines among the changed artists of
-    an axes whose image or data reach its edges)."""
+    an axes whose image or data reach its edges). The figure is left at DPI."""
     written: list[Path] = []
     background = None
+    animated: list[Artist] = []
     try:
         for path, changed in frames:
             for artist in changed:
                 artist.set_animated(True)  # left out of the background's draw
+            animated += changed
             canvas = fig.canvas
             if background is None:
                 fig.set_dpi(DPI)
@@ -77,6 +79,8 @@ def save_pngs(fig: plt.Figure, frames: Iterable[Frame], close: bool = True) -> l
                     artist.draw(renderer)
             written.append(_write_canvas(fig, path))
     finally:
+        for artist in animated:  # a figure's draw, even savefig's, leaves animated ones out
+            artist.set_animated(False)
         if close:
             plt.close(fig)
     return written

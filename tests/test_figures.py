@@ -160,8 +160,10 @@ def test_save_pngs_frames_equal_full_draws(tmp_path):
                 artist.set_animated(False)
             fig.savefig(tmp_path / f"full{k}.png", dpi=figures.DPI)  # the frame's state, whole
 
-    written = figures.save_pngs(fig, frames())
+    written = figures.save_pngs(fig, frames(), close=False)
     assert written == [tmp_path / f"frame{k}.png" for k in range(3)]
+    assert not any(a.get_animated() for a in changed)  # a later savefig draws them again
+    figures.plt.close(fig)
     for k in range(3):
         a, b = _pixels(tmp_path / f"frame{k}.png"), _pixels(tmp_path / f"full{k}.png")
         assert a.shape == b.shape
