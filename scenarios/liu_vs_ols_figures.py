@@ -99,7 +99,8 @@ def write_figures(out_dir: Path, maps: dict[str, dict[str, Any]]) -> dict[str, s
 
     def frames() -> Iterator[Frame]:
         for qty in ("position", "orientation"):
-            for r, c, title, img, extent, vmax in _panels(maps, qty)[2]:
+            drawn = panels if qty == "position" else _panels(maps, qty)[2]
+            for r, c, title, img, extent, vmax in drawn:
                 if extent != extents[r, c]:  # the axes drawn once must fit every quantity
                     raise ValueError(
                         f"panel {r}, {c}: {qty} nodes span {extent}, not {extents[r, c]}"

@@ -193,3 +193,42 @@ def test_parameter_bars_pngs_equal_one_chart_at_a_time(tmp_path):
         figures.parameter_bars_pngs(names, [charts[0], charts[1]._replace(estimates=np.ones(3))])
     assert not (tmp_path / "x.png").exists()
     _no_leftovers(tmp_path)
+
+
+def test_liu_vs_ols_error_maps_equal_full_draws(tmp_path, monkeypatch):
+    """The error maps (axes drawn once for both quantities) are, pixel for pixel, what a whole
+    savefig of each quantity's figure gives."""
+    from types import SimpleNamespace
+
+    from scenarios import liu_vs_ols_figures
+
+    rng = np.random.default_rng(4)
+    xy = _grid(5, 0.2)  # metres, a 5 x 5 layer
+
+    def layer(z: float) -> np.ndarray:
+        return np.column_stack([xy, np.full(len(xy), z), np.zeros((len(xy), 3))])
+
+    maps: dict = {"calibration": {}, "test": {}}
+    for stage in ("uncalibrated", "coarse", "ols", "loop"):
+        poses = np.vstack([layer(0.06), layer(-0.06)])
+        errs = SimpleNamespace(position=rng.random(len(poses)), orientation=rng.random(len(poses)))
+        maps["calibration"][stage] = (poses, errs)
+        test_errs = SimpleNamespace(position=rng.random(len(xy)), orientation=rng.random(len(xy)))
+        maps["test"][stage] = (layer(0.0), test_errs)
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "full").mkdir()
+    written = liu_vs_ols_figures.write_figures(tmp_path / "shared", maps)
+
+    def full_draws(fig, frames):
+        try:
+            for path, _changed in frames:
+                fig.savefig(path, dpi=figures.DPI)
+        finally:
+            figures.plt.close(fig)
+
+    monkeypatch.setattr(liu_vs_ols_figures, "save_pngs", full_draws)
+    assert liu_vs_ols_figures.write_figures(tmp_path / "full", maps) == written
+    for name in written.values():
+        a, b = _pixels(tmp_path / "shared" / name), _pixels(tmp_path / "full" / name)
+        assert a.shape == b.shape and a.shape[1] > a.shape[0]  # 4 stages by 3 layers
+        np.testing.assert_array_equal(a, b)
