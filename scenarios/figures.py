@@ -7,6 +7,8 @@ behind nor destroys an older one, and returns the path written.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -30,6 +32,23 @@ CMAP = "viridis"
 
 Panel = tuple[str, np.ndarray, np.ndarray]  # (name, xy_mm (N, 2), errors (N,))
 Frame = tuple[Path, Sequence[Artist]]  # (path, the artists this frame changed)
+
+
+@contextlib.contextmanager
+def collection_paused() -> Iterator[None]:
+    """No automatic garbage collection inside (the state before is restored after).
+
+    Drawing figures makes some hundred thousand objects that live in reference cycles until
+    the figure is closed; collected as they are made, they were promoted to the oldest
+    generation and set off full collections of the whole process (0.2 s in liu_vs_ols, every
+    other run). Paused, they are collected at once, young, by the first collection after."""
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
 
 
 def save_png(fig: plt.Figure, path: Path, close: bool = True) -> Path:

@@ -278,10 +278,9 @@ def _write_figures(
     shown: np.ndarray,
 ) -> dict[str, str]:
     """The error maps and the parameter bar charts of OLS and Liu (matplotlib imported here)."""
-    from scenarios.figures import Bars, parameter_bars_pngs
+    from scenarios.figures import Bars, collection_paused, parameter_bars_pngs
     from scenarios.liu_vs_ols_figures import write_figures
 
-    written = write_figures(out_dir, maps)
     labels = [label for label in ("ols", "liu") if label in estimates]
     charts = [
         Bars(
@@ -292,6 +291,8 @@ def _write_figures(
         )
         for label in labels
     ]
-    parameter_bars_pngs(kept_names, charts)  # one figure, the names drawn once
+    with collection_paused():
+        written = write_figures(out_dir, maps)
+        parameter_bars_pngs(kept_names, charts)  # one figure, the names drawn once
     written.update({f"estimates_{label}": f"estimates_{label}.png" for label in labels})
     return written

@@ -232,3 +232,20 @@ def test_liu_vs_ols_error_maps_equal_full_draws(tmp_path, monkeypatch):
         a, b = _pixels(tmp_path / "shared" / name), _pixels(tmp_path / "full" / name)
         assert a.shape == b.shape and a.shape[1] > a.shape[0]  # 4 stages by 3 layers
         np.testing.assert_array_equal(a, b)
+
+
+def test_collection_paused_restores_the_collector_state():
+    import gc
+
+    assert gc.isenabled()
+    with pytest.raises(RuntimeError), figures.collection_paused():
+        assert not gc.isenabled()
+        raise RuntimeError("a failing figure")
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with figures.collection_paused():
+            pass
+        assert not gc.isenabled()  # paused by someone else before: left so
+    finally:
+        gc.enable()
