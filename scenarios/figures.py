@@ -2,7 +2,10 @@
 
 Every function takes the output path and a title first, writes the PNG through a temporary
 file in the same folder (``os.replace``), so a failed write never leaves a partial figure
-behind nor destroys an older one, and returns the path written.
+behind nor destroys an older one, and returns the path written. Figures that differ only in
+some of their artists (the same parameters' estimates by two methods, the same panels of two
+quantities) are drawn by :func:`save_pngs`, what they share drawn once
+(:func:`parameter_bars_pngs` takes the names first, then one :class:`Bars` per chart).
 """
 
 from __future__ import annotations
