@@ -278,19 +278,21 @@ def _write_figures(
     shown: np.ndarray,
 ) -> dict[str, str]:
     """The error maps and the parameter bar charts of OLS and Liu (matplotlib imported here)."""
-    from scenarios.figures import parameter_bars_png
+    from scenarios.figures import Bars, collection_paused, parameter_bars_pngs
     from scenarios.liu_vs_ols_figures import write_figures
 
-    written = write_figures(out_dir, maps)
-    for label in ("ols", "liu"):
-        if label in estimates:
-            est = estimates[label][0]
-            parameter_bars_png(
-                out_dir / f"estimates_{label}.png",
-                f"polisher: {label} estimates of the identifiable set (mm, deg)",
-                kept_names,
-                est.x * shown,
-                est.std_errors * shown,
-            )
-            written[f"estimates_{label}"] = f"estimates_{label}.png"
+    labels = [label for label in ("ols", "liu") if label in estimates]
+    charts = [
+        Bars(
+            out_dir / f"estimates_{label}.png",
+            f"polisher: {label} estimates of the identifiable set (mm, deg)",
+            estimates[label][0].x * shown,
+            estimates[label][0].std_errors * shown,
+        )
+        for label in labels
+    ]
+    with collection_paused():
+        written = write_figures(out_dir, maps)
+        parameter_bars_pngs(kept_names, charts)  # one figure, the names drawn once
+    written.update({f"estimates_{label}": f"estimates_{label}.png" for label in labels})
     return written

@@ -8,12 +8,13 @@ calibrated map uniformly dark), from 0 to its max, which its title states with t
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from scenarios.figures import plt, save_png
+from scenarios.figures import DPI, Frame, plt, save_pngs
 
 SHOWN = ("uncalibrated", "coarse", "ols", "liu", "liu_paper_deg", "loop")
 
@@ -71,41 +72,46 @@ def _suptitle(qty: str) -> str:
 def write_figures(out_dir: Path, maps: dict[str, dict[str, Any]]) -> dict[str, str]:
     """maps[group][stage] = (poses (N, 6), PoseErrors); one PNG per quantity.
 
-    The grid of panels is laid out once and drawn for each quantity with its images and
-    titles replaced. Every layer spans the same x and y, so only the outer panels carry ticks
-    (x on the bottom row, y on the left column): the inner ones have none at all, which
-    spares drawing some two hundred ticks whose labels nobody would see."""
-    written: dict[str, str] = {}
+    The grid of panels is laid out and its axes (ticks and their labels) drawn once for both
+    quantities; each PNG draws only its images, titles and heading (and the frames, which lie
+    over the images' edges) over them. Every layer spans the same x and y, so only the outer
+    panels carry ticks (x on the bottom row, y on the left column): the inner ones have none at
+    all, which spares drawing some two hundred ticks whose labels nobody would see."""
     n_rows, n_cols, panels = _panels(maps, "position")
     fig, axes = plt.subplots(
-        n_rows, n_cols, figsize=(2.3 * n_cols, 2.2 * n_rows + 0.4), squeeze=False
+        n_rows, n_cols, figsize=(2.3 * n_cols, 2.2 * n_rows + 0.4), squeeze=False, dpi=DPI
     )
     fig.subplots_adjust(left=0.04, right=0.99, bottom=0.05, top=0.88, wspace=0.3, hspace=0.55)
-    images = {}
+    images, extents = {}, {}
     for r, c, _, img, extent, _vmax in panels:
         ax = axes[r, c]
         images[r, c] = ax.imshow(img, origin="lower", extent=extent, cmap="viridis", vmin=0)
+        extents[r, c] = extent
         ax.tick_params(labelsize=6)
         if r < n_rows - 1:
             ax.set_xticks([])
         if c > 0:
             ax.set_yticks([])
     heading = fig.suptitle("", fontsize=9)
-    try:
+    changed = [heading]
+    for ax in axes.flat:
+        changed += [*ax.images, *ax.spines.values(), ax.title]
+
+    def frames() -> Iterator[Frame]:
         for qty in ("position", "orientation"):
-            if qty != "position":
-                _, _, panels = _panels(maps, qty)
-            for r, c, title, img, extent, vmax in panels:
+            drawn = panels if qty == "position" else _panels(maps, qty)[2]
+            for r, c, title, img, extent, vmax in drawn:
+                if extent != extents[r, c]:  # the axes drawn once must fit every quantity
+                    raise ValueError(
+                        f"panel {r}, {c}: {qty} nodes span {extent}, not {extents[r, c]}"
+                    )
                 images[r, c].set_data(img)
-                images[r, c].set_extent(extent)
                 images[r, c].set_clim(0, vmax)
                 # y given: the title stays where it would be (ticks below), and the draw skips
                 # placing it above every tick label of every panel
                 axes[r, c].set_title(title, fontsize=7, y=1.0)
             heading.set_text(_suptitle(qty))
-            name = f"error_maps_{qty}.png"
-            save_png(fig, out_dir / name, close=False)
-            written[f"error_maps_{qty}"] = name
-    finally:
-        plt.close(fig)
-    return written
+            yield out_dir / f"error_maps_{qty}.png", changed
+
+    save_pngs(fig, frames())
+    return {f"error_maps_{qty}": f"error_maps_{qty}.png" for qty in ("position", "orientation")}

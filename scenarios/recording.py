@@ -48,17 +48,28 @@ from twin.mechanism import Mechanism
 
 ERROR_MAP_RADIUS = 0.004  # metres
 TARGET_RADIUS = 0.003  # metres
+NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
 PALETTE = [(220, 60, 50), (40, 110, 220), (40, 160, 80), (150, 80, 200), (230, 150, 30)]
+
+
+@functools.cache
+def _viridis() -> Any:
+    """The viridis colour map, looked up once (each lookup copies it and builds its table)."""
+    from matplotlib import colormaps
+
+    return colormaps["viridis"]
 
 
 def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     """RGB (N, 3) uint8 from viridis over [0, vmax]; NaN values come out grey."""
-    from matplotlib import colormaps
-
     v = np.asarray(values, dtype=float)
-    rgb = colormaps["viridis"](np.clip(np.nan_to_num(v) / max(vmax, 1e-300), 0.0, 1.0))[:, :3]
+    rgb = _viridis()(np.clip(np.nan_to_num(v) / max(vmax, 1e-300), 0.0, 1.0))[:, :3]
     rgb[~np.isfinite(v)] = 0.5
     return np.round(rgb * 255).astype(np.uint8)
+
+
+def _error_labels(error_mm: np.ndarray, scale: float) -> list[str]:
+    return [f"{e:.3f} mm (arrow x{scale:g})" for e in error_mm]
 
 
 def entity_part(name: str) -> str:
@@ -261,31 +272,94 @@ class Recorder:
     ) -> None:
         """Nominal and measured targets (T, 3) in metres, and the error magnified ``scale``x,
         under ``world/targets/<group>`` (one 3D view per group)."""
-        rr = self.rr
         nominal = np.atleast_2d(np.asarray(nominal, dtype=float))
         measured = np.atleast_2d(np.asarray(measured, dtype=float))
-        error_mm = np.linalg.norm(measured - nominal, axis=1) * 1e3
         self._time(timeline, index)
         root = f"world/targets/{entity_part(group)}"
-        logs = {
-            f"{root}/nominal": rr.Points3D(nominal, radii=TARGET_RADIUS, colors=[[110, 130, 255]]),
-            f"{root}/measured": rr.Points3D(measured, radii=TARGET_RADIUS, colors=[[255, 130, 60]]),
-            f"{root}/error": rr.Arrows3D(
+        for part, archetype in self._target_archetypes(nominal, measured, scale).items():
+            self._rec.log(f"{root}/{part}", archetype)
+            self._reference.setdefault(f"{root}/{part}", [archetype])
+        self._note_targets(timeline, [index], nominal, group)
+
+    def _target_archetypes(
+        self, nominal: np.ndarray, measured: np.ndarray, scale: float
+    ) -> dict[str, Any]:
+        """What log_targets logs of one pose, by entity below the group's."""
+        rr = self.rr
+        error_mm = np.linalg.norm(measured - nominal, axis=1) * 1e3
+        return {
+            "nominal": rr.Points3D(nominal, radii=TARGET_RADIUS, colors=[NOMINAL_COLOUR]),
+            "measured": rr.Points3D(measured, radii=TARGET_RADIUS, colors=[MEASURED_COLOUR]),
+            "error": rr.Arrows3D(
                 origins=nominal,
                 vectors=(measured - nominal) * scale,
                 radii=TARGET_RADIUS / 2,
-                labels=[f"{e:.3f} mm (arrow x{scale:g})" for e in error_mm],
+                labels=_error_labels(error_mm, scale),
                 show_labels=True,
-                colors=[[230, 40, 40]],
+                colors=[ERROR_COLOUR],
             ),
         }
-        for path, archetype in logs.items():
-            self._rec.log(path, archetype)
-            self._reference.setdefault(path, [archetype])
-        self.logged.machine_bounds.add(nominal)
-        self.logged.pose_timelines.setdefault(timeline, set()).add(int(index))
+
+    def _note_targets(
+        self, timeline: str, indices: Sequence[int], nominal: np.ndarray, group: str
+    ) -> None:
+        self.logged.machine_bounds.add(nominal.reshape(-1, 3))
+        self.logged.pose_timelines.setdefault(timeline, set()).update(int(k) for k in indices)
         self.logged.target_groups.setdefault(entity_part(group), group)
         self.logged.group_timelines.setdefault(entity_part(group), timeline)
+
+    @_active
+    def _log_targets_columns(
+        self,
+        timeline: str,
+        indices: list[int],
+        nominal: np.ndarray,
+        measured: np.ndarray,
+        scale: float,
+        group: str,
+    ) -> None:
+        """log_targets of every pose (P, T, 3) in one column per entity: each row the
+        same components as log_targets logs at that pose."""
+        rr = self.rr
+        n_poses, n_targets = nominal.shape[:2]
+        lengths = [n_targets] * n_poses
+        flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
+        error_mm = np.linalg.norm(flat_measured - flat_nominal, axis=1) * 1e3
+        times = [rr.TimeColumn(timeline, sequence=indices)]
+        root = f"world/targets/{entity_part(group)}"
+        columns = {
+            "nominal": [
+                *rr.Points3D.columns(positions=flat_nominal).partition(lengths),
+                *rr.Points3D.columns(
+                    radii=[TARGET_RADIUS] * n_poses, colors=[NOMINAL_COLOUR] * n_poses
+                ),
+            ],
+            "measured": [
+                *rr.Points3D.columns(positions=flat_measured).partition(lengths),
+                *rr.Points3D.columns(
+                    radii=[TARGET_RADIUS] * n_poses, colors=[MEASURED_COLOUR] * n_poses
+                ),
+            ],
+            "error": [
+                *rr.Arrows3D.columns(
+                    origins=flat_nominal,
+                    vectors=(flat_measured - flat_nominal) * scale,
+                    labels=_error_labels(error_mm, scale),
+                ).partition(lengths),
+                *rr.Arrows3D.columns(
+                    radii=[TARGET_RADIUS / 2] * n_poses,
+                    show_labels=[True] * n_poses,
+                    colors=[ERROR_COLOUR] * n_poses,
+                ),
+            ],
+        }
+        for part, cols in columns.items():
+            self._rec.send_columns(f"{root}/{part}", indexes=times, columns=cols)
+        if any(f"{root}/{part}" not in self._reference for part in columns):
+            first = self._target_archetypes(nominal[0], measured[0], scale)
+            for part, archetype in first.items():
+                self._reference.setdefault(f"{root}/{part}", [archetype])
+        self._note_targets(timeline, indices, nominal, group)
 
     @_active
     def log_poses(
@@ -301,15 +375,21 @@ class Recorder:
     ) -> None:
         """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3).
 
-        The bodies' transforms of all poses go out as one column per body (what
-        :meth:`log_pose` logs pose by pose, in one call per body instead of one per body and
-        pose)."""
+        The bodies' transforms and the targets of all poses go out as one column per entity
+        (what :meth:`log_pose` and :meth:`log_targets` log pose by pose, in one call per
+        entity instead of one per entity and pose)."""
         indices = [int(k) for k in indices]
         qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
-        if self._rec is not None and len(indices) == len(qpos) and len(indices) > 0:
+        nominal, measured = np.asarray(nominal, dtype=float), np.asarray(measured, dtype=float)
+        shape = (len(indices), nominal.shape[1] if nominal.ndim == 3 else 0, 3)
+        if (
+            self._rec is not None
+            and len(indices) == len(qpos) > 0
+            and nominal.shape == measured.shape == shape
+            and shape[1] > 0
+        ):
             self._log_bodies_columns(timeline, indices, mech, qpos)
-            for k, a, b in zip(indices, nominal, measured, strict=True):
-                self.log_targets(timeline, k, a, b, scale=scale, group=group)
+            self._log_targets_columns(timeline, indices, nominal, measured, scale, group)
             return
         for k, q, a, b in zip(indices, qpos, nominal, measured, strict=True):
             self.log_pose(timeline, k, mech, q)

@@ -356,8 +356,9 @@ def test_scenario_recordings_show_data_in_every_view(tmp_path, name):  # in its 
 
 
 def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
-    """log_poses sends each body's transforms of all poses as one column: read back, the
-    same transforms at the same time points as pose-by-pose log_pose (and the same targets)."""
+    """log_poses sends each body's transforms and each target entity of all poses as one
+    column: read back, the same transforms, points and arrows (labels included) at the same
+    time points as pose-by-pose log_pose and log_targets."""
     monkeypatch.setenv("RERUN_STRICT", "1")
     mech = Mechanism.from_xml(HEXAPOD)
     home = mech.home_qpos[mech.actuator_qpos]
