@@ -112,7 +112,8 @@ def analyse(jac: np.ndarray, names: tuple[str, ...] | list[str]) -> Identifiabil
         scaled = np.linalg.qr(scaled, mode="r")
     s = np.linalg.svd(scaled, compute_uv=False)
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
-    order = pivoted_qr_order(scaled, rank)
+    # full column rank: every column is chosen, whatever the pivots' order
+    order = list(range(n)) if rank == n else pivoted_qr_order(scaled, rank)
     identifiable_idx = sorted(order)
     reasons: dict[str, str] = {}
     sub = scaled[:, identifiable_idx]
@@ -135,7 +136,12 @@ def analyse(jac: np.ndarray, names: tuple[str, ...] | list[str]) -> Identifiabil
     if m < n:
         for nm in list(reasons):
             reasons[nm] += f"; {m} equations for {n} parameters"
-    cond = float(np.linalg.cond(sub)) if identifiable_idx else float("inf")
+    if not identifiable_idx:
+        cond = float("inf")
+    elif len(identifiable_idx) == n:  # sub is scaled: its singular values are s
+        cond = float(s[0] / s[-1])
+    else:
+        cond = float(np.linalg.cond(sub))
     return IdentifiabilityReport(
         names=names,
         n_rows=m,
