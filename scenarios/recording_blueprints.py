@@ -218,9 +218,8 @@ def build_blueprint(log: Logged, timeline: str | None = None) -> Any:
         root = columns[0]
     else:
         root = rrb.Horizontal(*columns, column_shares=[3.0, 2.0])
-    panels = [
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline=timeline) if timeline else rrb.TimePanel(),
-    ]
+    panels = [rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed")]
+    if timeline:  # else the viewer's own time panel (an empty one is a chunk rerun drops
+        # with a warning)
+        panels.append(rrb.TimePanel(state="collapsed", timeline=timeline))
     return rrb.Blueprint(root, *panels, auto_layout=False, auto_views=False)
