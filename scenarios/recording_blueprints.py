@@ -218,8 +218,13 @@ def build_blueprint(log: Logged, timeline: str | None = None) -> Any:
         root = columns[0]
     else:
         root = rrb.Horizontal(*columns, column_shares=[3.0, 2.0])
-    panels = [rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed")]
-    if timeline:  # else the viewer's own time panel (an empty one is a chunk rerun drops
-        # with a warning)
-        panels.append(rrb.TimePanel(state="collapsed", timeline=timeline))
+    panels = [
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        # no timeline: nothing to scrub through (an empty TimePanel() was a chunk rerun
+        # dropped with a warning, leaving the panel open)
+        rrb.TimePanel(state="collapsed", timeline=timeline)
+        if timeline
+        else rrb.TimePanel(state="collapsed"),
+    ]
     return rrb.Blueprint(root, *panels, auto_layout=False, auto_views=False)
