@@ -546,8 +546,10 @@ class Recorder:
 
     @_active
     def log_text(self, path: str, markdown: str, name: str | None = None) -> None:
-        """A static markdown document (a table, a residual diagnosis ...), one text view."""
-        doc = self.rr.TextDocument(markdown, media_type=self.rr.MediaType.MARKDOWN)
+        """A static markdown document (a table, a residual diagnosis ...), one text view.
+        A figure a report links by a relative path is named instead (:func:`viewer_markdown`):
+        the viewer cannot open files beside the recording."""
+        doc = self.rr.TextDocument(viewer_markdown(markdown), media_type=self.rr.MediaType.MARKDOWN)
         self._rec.log(path, doc, static=True)
         self.logged.texts[path] = name or path.replace("_", " ")
 
@@ -586,6 +588,16 @@ class Recorder:
 
         report = importlib.import_module(STUDIES[study][1]).report
         self.log_text("report", report(summary), name="report: key numbers")
+
+
+RELATIVE_IMAGE = re.compile(r"!\[([^\]]*)\]\((?![a-zA-Z][a-zA-Z0-9+.-]*:)([^)\s]+)\)")
+
+
+def viewer_markdown(markdown: str) -> str:
+    """``markdown`` with each image linked by a relative path (a report's figure beside it)
+    replaced by its name and file, in italics: the viewer shows such a link as a broken
+    image."""
+    return RELATIVE_IMAGE.sub(r"*Figure: \1 (`\2`, beside the recording)*", markdown)
 
 
 def merge_nodes(positions: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -213,6 +213,17 @@ def test_disabled_recorder_writes_nothing(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_reports_figures_are_named_not_shown_as_broken_images(tmp_path):
+    """The viewer cannot open a figure beside the recording: its link becomes its name."""
+    path = tmp_path / "r.rrd"
+    with Recorder(path, "report") as rec:
+        rec.log_text("report", "# R\n\n![error maps](maps.png)\n\n![web](https://x.org/a.png)")
+    text = Readback(path).rows["/report", "TextDocument:text"][0][0]
+    assert "![error maps]" not in text
+    assert "*Figure: error maps (`maps.png`, beside the recording)*" in text
+    assert "![web](https://x.org/a.png)" in text  # a link the viewer can follow stays
+
+
 def test_close_is_idempotent_and_file_readable(tmp_path):
     path = tmp_path / "sub" / "y.rrd"
     rec = Recorder(path, "twice")
