@@ -39,7 +39,8 @@ class CompiledPlan:
     out_sites: np.ndarray
 
 
-def _ints(x) -> np.ndarray:
+def int_array(x) -> np.ndarray:
+    """``x`` as a contiguous int64 array (the kernels' index type)."""
     return np.ascontiguousarray(np.asarray(x, dtype=np.int64))
 
 
@@ -59,12 +60,12 @@ def _build_plan(fk: FastKinematics) -> CompiledPlan | None:
     cs = fk.closure
     nc = len(mech.closures)
     structure = (
-        _ints(m.body_parentid),
-        _ints(m.body_jntadr),
-        _ints(m.body_jntnum),
-        _ints(m.jnt_type),
-        _ints(m.jnt_qposadr),
-        _ints(m.site_bodyid),
+        int_array(m.body_parentid),
+        int_array(m.body_jntadr),
+        int_array(m.body_jntnum),
+        int_array(m.jnt_type),
+        int_array(m.jnt_qposadr),
+        int_array(m.site_bodyid),
     )
     if cs is None:  # a serial chain: no closure, no free dof
         none = np.zeros(0, dtype=np.int64)
@@ -89,20 +90,20 @@ def _build_plan(fk: FastKinematics) -> CompiledPlan | None:
             g = cs.groups[cs.group_of[c]]
             private[c, : g.k] = g.private[cs.slot_of[c]]
         closure = (
-            _ints(cs.sites),
+            int_array(cs.sites),
             rows,
-            _ints(cs.row_offset),
+            int_array(cs.row_offset),
             k,
             private,
-            _ints(cs.shared),
+            int_array(cs.shared),
             np.ascontiguousarray(cs.site_moves, dtype=np.uint8),
             bool(cs.square),
         )
         dofs = (
-            _ints(cs.dof_kind),
-            _ints(cs.dof_joint),
-            _ints(cs.dof_body),
-            _ints(cs.dof_col),
+            int_array(cs.dof_kind),
+            int_array(cs.dof_joint),
+            int_array(cs.dof_body),
+            int_array(cs.dof_col),
             np.ascontiguousarray(cs.dof_rot, dtype=np.bool_),
         )
     multi = fk.multi_joints
@@ -112,13 +113,13 @@ def _build_plan(fk: FastKinematics) -> CompiledPlan | None:
         width = 6 if int(m.jnt_type[j]) == FREE else 3
         multi_rows[i, :width] = [fk.free_position[da + t] for t in range(width)]
     motion = (
-        _ints(fk.simple_qpos),
-        _ints(fk.simple_rows),
-        _ints(m.jnt_type[multi]) if multi else np.zeros(0, np.int64),
-        _ints(m.jnt_qposadr[multi]) if multi else np.zeros(0, np.int64),
+        int_array(fk.simple_qpos),
+        int_array(fk.simple_rows),
+        int_array(m.jnt_type[multi]) if multi else np.zeros(0, np.int64),
+        int_array(m.jnt_qposadr[multi]) if multi else np.zeros(0, np.int64),
         multi_rows,
     )
-    return CompiledPlan(structure, closure, dofs, motion, _ints(fk.out_sites))
+    return CompiledPlan(structure, closure, dofs, motion, int_array(fk.out_sites))
 
 
 def _rotations(quat: np.ndarray) -> np.ndarray:

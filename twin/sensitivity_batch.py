@@ -7,6 +7,10 @@ from the numpy kinematic tree (twin.kinematics_tree), the screws as arrays over 
 parameters, and the implicit term ``-J_t (dc/dq)^-1 dc/dpi`` through one adjoint solve per
 output coordinate (twin.kinematics_adjoint), contracted only over the (site, parameter)
 pairs that move. The tests hold it equal to the per-pose function to round-off.
+
+Where the compiled kernel covers the machine (a serial chain or a square closure system),
+the same steps run pose by pose in machine code instead (twin.sensitivity_compiled); the
+arrays over poses here serve over-determined closures and are the kernel's reference.
 """
 
 from __future__ import annotations

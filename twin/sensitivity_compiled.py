@@ -17,6 +17,7 @@ import numpy as np
 from twin.kinematics_compiled import (
     CompiledPlan,
     compiled_numbers,
+    int_array,
     own_copy,
     pose_chunks,
     processors,
@@ -28,10 +29,6 @@ from twin.parameters import ParameterSet, left_jacobian_so3
 # the kernel's screw kinds (twin.kinematics_compiled_kernels.screws)
 SHIFT, TURN, HINGE, SLIDE = 0, 1, 2, 3
 PARALLEL_MIN = 64  # fewer poses than this: one thread
-
-
-def _ints(x) -> np.ndarray:
-    return np.ascontiguousarray(np.asarray(x, dtype=np.int64))
 
 
 def screw_arrays(
@@ -62,7 +59,7 @@ def screw_arrays(
         code[k], body[k], vec[k] = SHIFT, model.site_bodyid[el[k]], axis[k]
     for k in np.flatnonzero(kind == 3):
         code[k] = HINGE if params.is_angle[k] else SLIDE
-    return code, _ints(el), body, vec, pivot
+    return code, int_array(el), body, vec, pivot
 
 
 def jacobian_compiled(
@@ -87,8 +84,8 @@ def jacobian_compiled(
     nc = len(closure_sites) // 2
     affected = params.site_affected(model, np.concatenate([closure_sites, sites]).astype(int))
     pairs = (*np.nonzero(affected[: 2 * nc]), *np.nonzero(affected[2 * nc :]))
-    pairs = tuple(_ints(p) for p in pairs)
-    outputs = (_ints(sites), np.ascontiguousarray(moves, dtype=np.uint8), bool(angular))
+    pairs = tuple(int_array(p) for p in pairs)
+    outputs = (int_array(sites), np.ascontiguousarray(moves, dtype=np.uint8), bool(angular))
     parameters = screw_arrays(params, model, values)
     numbers = compiled_numbers(fk)
     qs = np.ascontiguousarray(qpos, dtype=float)
