@@ -84,6 +84,30 @@ FOUR_BAR = """
 """
 
 
+def four_bar_with_errors():
+    """The four-bar (a least-squares closure: more equations than free dofs) with one error
+    of every kind injected: (the error model, its values, the injected machine, 9 closed
+    poses over the crank's stroke)."""
+    from twin.parameters import Parameter, ParameterSet
+
+    nominal = Mechanism.from_xml_string(FOUR_BAR)
+    params = ParameterSet(
+        [
+            Parameter("rocker_x", "body_pos", "rocker", (1.0, 0.0, 0.0)),
+            Parameter("rocker_y", "body_pos", "rocker", (0.0, 1.0, 0.0)),
+            Parameter("coupler_rz", "body_rot", "coupler", (0.0, 0.0, 1.0)),
+            Parameter("tool_y", "site_pos", "tool", (0.0, 1.0, 0.0)),
+            Parameter("end_y", "site_pos", "end", (0.0, 1.0, 0.0)),
+            Parameter("j2_zero", "joint_zero", "j2"),
+        ],
+        nominal.model,
+    )
+    values = np.array([1e-3, -2e-3, 3e-3, 2e-3, 1e-3, -2e-3])
+    mech = nominal.with_model(params.inject(nominal.model, values))
+    qpos = forward_batch(mech, np.linspace(-0.4, 0.4, 9)[:, None]).qpos
+    return params, values, mech, qpos
+
+
 def _mujoco_frames(model: mujoco.MjModel, qpos: np.ndarray) -> list[dict[str, np.ndarray]]:
     data = mujoco.MjData(model)
     out = []

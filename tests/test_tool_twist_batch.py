@@ -88,25 +88,10 @@ def test_least_squares_closure_equals_per_pose():
     """A closure with more equations than free dofs (a planar four-bar closed by a spherical
     connect; the tool on the coupler, which the rocker's joint does not move): the
     least-squares path."""
-    from tests.test_kinematics_fast import FOUR_BAR
-    from twin.parameters import Parameter, ParameterSet
+    from tests.test_kinematics_fast import four_bar_with_errors
 
-    nominal = Mechanism.from_xml_string(FOUR_BAR)
-    params = ParameterSet(
-        [
-            Parameter("rocker_x", "body_pos", "rocker", (1.0, 0.0, 0.0)),
-            Parameter("rocker_y", "body_pos", "rocker", (0.0, 1.0, 0.0)),
-            Parameter("coupler_rz", "body_rot", "coupler", (0.0, 0.0, 1.0)),
-            Parameter("tool_y", "site_pos", "tool", (0.0, 1.0, 0.0)),
-            Parameter("end_y", "site_pos", "end", (0.0, 1.0, 0.0)),
-            Parameter("j2_zero", "joint_zero", "j2"),
-        ],
-        nominal.model,
-    )
-    values = np.array([1e-3, -2e-3, 3e-3, 2e-3, 1e-3, -2e-3])
-    mech = nominal.with_model(params.inject(nominal.model, values))
+    params, values, mech, qpos = four_bar_with_errors()
     assert not fast_kinematics(mech).closure.square
-    qpos = forward_batch(mech, np.linspace(-0.4, 0.4, 9)[:, None]).qpos
     per_pose = np.array([tool_twist_jacobian(mech, params, values, q) for q in qpos])
     _assert_equal(tool_twist_jacobian_batch(mech, params, values, qpos), per_pose)
     acts = actuator_joint_parameters(mech)
