@@ -68,6 +68,19 @@ def save_png(fig: plt.Figure, path: Path, close: bool = True) -> Path:
             plt.close(fig)
 
 
+def png_bytes(fig: plt.Figure, close: bool = True) -> bytes:
+    """``fig`` as PNG bytes (at DPI, as save_png), for a recording; then closed."""
+    import io
+
+    buffer = io.BytesIO()
+    try:
+        fig.savefig(buffer, dpi=DPI, format="png", pil_kwargs=PNG_OPTIONS)
+    finally:
+        if close:
+            plt.close(fig)
+    return buffer.getvalue()
+
+
 def save_pngs(fig: plt.Figure, frames: Iterable[Frame], close: bool = True) -> list[Path]:
     """One PNG per frame of ``fig``, what the frames share drawn once (at DPI, as save_png).
 

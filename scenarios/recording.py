@@ -5,28 +5,33 @@ logging, ``rec.disconnect`` on ``close`` to write the footer); ``spawn_viewer`` 
 viewer. A Recorder made with no path and no viewer does nothing, cheaply (rerun is not even
 imported). See docs/recordings.md for what each scenario's recording looks like.
 
-What a study logs, and where:
+A recording has one timeline at most, the poses' (rerun's own wall-clock timelines are off):
+the viewer plots and poses against the timeline selected, so a second one would be a face of
+the recording where the other views are empty. A second timeline raises
+``recording_blueprints.SecondTimeline``. What a study logs, and where:
 
 * ``log_mechanism``: MJCF has no rerun loader, so each body is logged flat under
-  ``world/bodies/<body>`` and its geoms as static shapes in body coordinates below it;
-  ``log_pose`` places the bodies (a world Transform3D each, from ``xpos``/``xquat``) at one
-  index of a pose timeline, ``log_targets`` the nominal and measured targets of that pose and
-  the error magnified ``scale`` times (labelled in mm) under ``world/targets/<group>``.
+  ``world/bodies/<body>`` (``world/<machine>/bodies`` for one of several machines) and its
+  geoms as static shapes in body coordinates below it; ``log_pose`` / ``log_poses`` place the
+  bodies (a world Transform3D each, from ``xpos``/``xquat``) at indices of the pose timeline,
+  with the nominal and measured targets, the error arrows (magnified to be seen, the factor in
+  the view's title) and each error in mm as a label set off from the target, under
+  ``world/targets/<group>`` (recording_targets).
 * ``log_error_map``: static nodes coloured by error (viridis, grey for NaN) with a colour
   scale in mm beside them, under ``error_maps/<stage>/<layer>``.
-* ``log_metric`` / ``log_points``: one point of ``metrics/<family>/<curve>`` on a timeline,
+* ``log_figure``: a static figure (a PNG, a report's figure), for any curve that is not
+  against the poses: an iteration count, a rank index, a variable that explains an effect.
+* ``log_metric`` / ``log_points``: one point of ``metrics/<family>/<curve>`` on the timeline,
   drawn as a line or as markers (a curve of one point is always drawn as a marker).
 * ``log_parameters``, ``log_text``, ``log_report``, ``log_verdict``: markdown text views (the
   estimates by name with standard errors, the report's key numbers, the named effect);
-  ``log_bars`` a static bar chart; ``log_loop`` the loop-closing residuals before and after.
+  ``log_loop`` the loop-closing residuals before and after.
 
 Each call notes what it logged in ``self.logged`` (``recording_blueprints.Logged``). On
-``close`` the series styles are written, the first pose is copied onto the active timeline
-when that is not a pose timeline (so the machine is not empty there), and, if asked for with
-``send_blueprint``, the blueprint is built from ``self.logged`` (``build_blueprint``): only
-views that have data on the timeline the viewer opens on. Every timed log call sets its own
-timeline only (the stream's time is reset first), so a metric logged after a pose does not
-inherit the pose's time point. ``RERUN_STRICT`` is read when a Recorder is made (rerun itself
+``close`` the series styles are written, a machine never posed is placed at its home pose
+(static), and, if asked for with ``send_blueprint``, the blueprint is built from
+``self.logged`` (``build_blueprint``). Every timed log call sets its own time only (the
+stream's time is reset first). ``RERUN_STRICT`` is read when a Recorder is made (rerun itself
 reads it once, at import): when set, a rerun usage mistake raises instead of becoming a
 warning.
 """
@@ -43,11 +48,25 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from scenarios.recording_blueprints import Bounds, ErrorMap, Logged, Series, build_blueprint
+from scenarios.recording_blueprints import (
+    Bounds,
+    ErrorMap,
+    Logged,
+    Series,
+    TargetGroup,
+    build_blueprint,
+)
+from scenarios.recording_targets import (
+    TARGET_RADIUS,
+    arrow_scale,
+    error_labels,
+    label_positions,
+    spread,
+)
 from twin.mechanism import Mechanism
 
 ERROR_MAP_RADIUS = 0.004  # metres
-TARGET_RADIUS = 0.003  # metres
+ARROW_RADIUS = 0.002  # metres
 NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
 PALETTE = [(220, 60, 50), (40, 110, 220), (40, 160, 80), (150, 80, 200), (230, 150, 30)]
 
@@ -66,10 +85,6 @@ def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
     rgb = _viridis()(np.clip(np.nan_to_num(v) / max(vmax, 1e-300), 0.0, 1.0))[:, :3]
     rgb[~np.isfinite(v)] = 0.5
     return np.round(rgb * 255).astype(np.uint8)
-
-
-def _error_labels(error_mm: np.ndarray, scale: float) -> list[str]:
-    return [f"{e:.3f} mm (arrow x{scale:g})" for e in error_mm]
 
 
 def entity_part(name: str) -> str:
@@ -138,8 +153,7 @@ class Recorder:
         self.logged = Logged()
         self._rec: Any = None
         self._want_blueprint = False
-        self._home: Mechanism | None = None
-        self._reference: dict[str, list[Any]] = {}  # entity -> its first pose's archetypes
+        self._home: dict[str, Mechanism] = {}  # machine -> its nominal mechanism
         if not self.enabled:
             return
         import rerun as rr
@@ -148,6 +162,10 @@ class Recorder:
         self.rr = rr
         self._strict = default_strict_mode()  # RERUN_STRICT as it is now, not at import
         self._rec = rr.RecordingStream(app_id)
+        # the study's timeline only: a wall-clock timeline would be a face of the recording
+        # where the views of data sent as columns (the poses) are empty
+        self._rec.set_log_time_enabled(False)
+        self._rec.set_log_tick_enabled(False)
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path)
@@ -177,6 +195,7 @@ class Recorder:
         return catch_and_log_exceptions("Recorder", strict=True)
 
     def _time(self, timeline: str, index: int) -> None:
+        self.logged.use_timeline(timeline)
         self._rec.reset_time()
         self._rec.set_time(timeline, sequence=int(index))
 
@@ -199,25 +218,21 @@ class Recorder:
                 else rr.SeriesLines(names=[name], colors=color, widths=[2.0])
             )
             self._rec.log(path, style, static=True)
-        if self._home is not None and not log.pose_timelines:  # no pose: show the home pose
-            self._log_bodies(self._home, self._home.home_qpos, static=True)
-        active = log.active_timeline()
-        if active is not None and active not in log.pose_timelines and self._reference:
-            self._time(
-                active, min(next(s.indices for s in log.series.values() if s.timeline == active))
-            )
-            for path, archetypes in self._reference.items():  # the first pose on this timeline too
-                self._rec.log(path, *archetypes)
+        for machine, mech in self._home.items():
+            if not log.poses:  # never posed: the home pose, on any timeline
+                self._log_bodies(mech, mech.home_qpos, machine, static=True)
         if self._want_blueprint:
             self._rec.send_blueprint(build_blueprint(log))
 
-    def _body_path(self, m: mujoco.MjModel, b: int) -> str:
-        name = _name(m, mujoco.mjtObj.mjOBJ_BODY, b, "body")
-        return f"world/bodies/{self.rr.escape_entity_path_part(name)}"
+    def _body_path(self, m: mujoco.MjModel, b: int, machine: str = "") -> str:
+        name = self.rr.escape_entity_path_part(_name(m, mujoco.mjtObj.mjOBJ_BODY, b, "body"))
+        return f"world/{entity_part(machine)}/bodies/{name}" if machine else f"world/bodies/{name}"
 
     @_active
-    def log_mechanism(self, mech: Mechanism) -> None:
-        """Every geom as a static shape under its body, placed by geom_pos/geom_quat."""
+    def log_mechanism(self, mech: Mechanism, machine: str = "") -> None:
+        """Every geom as a static shape under its body, placed by geom_pos/geom_quat; under
+        ``world/<machine>/bodies`` when a recording shows several machines (``machine``
+        names it in log_pose and log_targets too), else ``world/bodies``."""
         rr, m = self.rr, mech.model
         self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for g in range(m.ngeom):
@@ -228,10 +243,11 @@ class Recorder:
             pose = rr.Transform3D(
                 translation=m.geom_pos[g], quaternion=rr.Quaternion(xyzw=_xyzw(m.geom_quat[g]))
             )
-            path = f"{self._body_path(m, int(m.geom_bodyid[g]))}/{geom}"
+            path = f"{self._body_path(m, int(m.geom_bodyid[g]), machine)}/{geom}"
             self._rec.log(path, pose, shape, static=True)
-        self.logged.mechanism = True
-        self._home = mech
+        if machine not in self.logged.machines:
+            self.logged.machines.append(machine)
+        self._home[machine] = mech
         d = mujoco.MjData(m)
         d.qpos[:] = mech.home_qpos
         mujoco.mj_kinematics(m, d)
@@ -239,26 +255,27 @@ class Recorder:
         r = np.minimum(m.geom_rbound, 1.0)[shown, None]  # a sphere around each shown geom
         self.logged.machine_bounds.add(np.vstack([d.geom_xpos[shown] - r, d.geom_xpos[shown] + r]))
 
-    def _log_bodies(self, mech: Mechanism, qpos: np.ndarray, static: bool = False) -> None:
+    def _log_bodies(
+        self, mech: Mechanism, qpos: np.ndarray, machine: str = "", static: bool = False
+    ) -> None:
         rr, m, d = self.rr, mech.model, mech.data
         d.qpos[:] = qpos
         mujoco.mj_kinematics(m, d)
         self.logged.machine_bounds.add(d.xpos[1:])
         for b in range(1, m.nbody):
-            path = self._body_path(m, b)
             t = rr.Transform3D(
                 translation=d.xpos[b], quaternion=rr.Quaternion(xyzw=_xyzw(d.xquat[b]))
             )
-            self._rec.log(path, t, static=static)
-            if not static:
-                self._reference.setdefault(path, [t])
+            self._rec.log(self._body_path(m, b, machine), t, static=static)
 
     @_active
-    def log_pose(self, timeline: str, index: int, mech: Mechanism, qpos: np.ndarray) -> None:
+    def log_pose(
+        self, timeline: str, index: int, mech: Mechanism, qpos: np.ndarray, machine: str = ""
+    ) -> None:
         """One configuration: a world Transform3D per body (flat under world/bodies)."""
         self._time(timeline, index)
-        self._log_bodies(mech, qpos)
-        self.logged.pose_timelines.setdefault(timeline, set()).add(int(index))
+        self._log_bodies(mech, qpos, machine)
+        self.logged.poses.add(int(index))
 
     @_active
     def log_targets(
@@ -269,97 +286,11 @@ class Recorder:
         measured: np.ndarray,
         scale: float = 100.0,
         group: str = "targets",
+        machine: str = "",
     ) -> None:
         """Nominal and measured targets (T, 3) in metres, and the error magnified ``scale``x,
-        under ``world/targets/<group>`` (one 3D view per group)."""
-        nominal = np.atleast_2d(np.asarray(nominal, dtype=float))
-        measured = np.atleast_2d(np.asarray(measured, dtype=float))
-        self._time(timeline, index)
-        root = f"world/targets/{entity_part(group)}"
-        for part, archetype in self._target_archetypes(nominal, measured, scale).items():
-            self._rec.log(f"{root}/{part}", archetype)
-            self._reference.setdefault(f"{root}/{part}", [archetype])
-        self._note_targets(timeline, [index], nominal, group)
-
-    def _target_archetypes(
-        self, nominal: np.ndarray, measured: np.ndarray, scale: float
-    ) -> dict[str, Any]:
-        """What log_targets logs of one pose, by entity below the group's."""
-        rr = self.rr
-        error_mm = np.linalg.norm(measured - nominal, axis=1) * 1e3
-        return {
-            "nominal": rr.Points3D(nominal, radii=TARGET_RADIUS, colors=[NOMINAL_COLOUR]),
-            "measured": rr.Points3D(measured, radii=TARGET_RADIUS, colors=[MEASURED_COLOUR]),
-            "error": rr.Arrows3D(
-                origins=nominal,
-                vectors=(measured - nominal) * scale,
-                radii=TARGET_RADIUS / 2,
-                labels=_error_labels(error_mm, scale),
-                show_labels=True,
-                colors=[ERROR_COLOUR],
-            ),
-        }
-
-    def _note_targets(
-        self, timeline: str, indices: Sequence[int], nominal: np.ndarray, group: str
-    ) -> None:
-        self.logged.machine_bounds.add(nominal.reshape(-1, 3))
-        self.logged.pose_timelines.setdefault(timeline, set()).update(int(k) for k in indices)
-        self.logged.target_groups.setdefault(entity_part(group), group)
-        self.logged.group_timelines.setdefault(entity_part(group), timeline)
-
-    @_active
-    def _log_targets_columns(
-        self,
-        timeline: str,
-        indices: list[int],
-        nominal: np.ndarray,
-        measured: np.ndarray,
-        scale: float,
-        group: str,
-    ) -> None:
-        """log_targets of every pose (P, T, 3) in one column per entity: each row the
-        same components as log_targets logs at that pose."""
-        rr = self.rr
-        n_poses, n_targets = nominal.shape[:2]
-        lengths = [n_targets] * n_poses
-        flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
-        error_mm = np.linalg.norm(flat_measured - flat_nominal, axis=1) * 1e3
-        times = [rr.TimeColumn(timeline, sequence=indices)]
-        root = f"world/targets/{entity_part(group)}"
-        columns = {
-            "nominal": [
-                *rr.Points3D.columns(positions=flat_nominal).partition(lengths),
-                *rr.Points3D.columns(
-                    radii=[TARGET_RADIUS] * n_poses, colors=[NOMINAL_COLOUR] * n_poses
-                ),
-            ],
-            "measured": [
-                *rr.Points3D.columns(positions=flat_measured).partition(lengths),
-                *rr.Points3D.columns(
-                    radii=[TARGET_RADIUS] * n_poses, colors=[MEASURED_COLOUR] * n_poses
-                ),
-            ],
-            "error": [
-                *rr.Arrows3D.columns(
-                    origins=flat_nominal,
-                    vectors=(flat_measured - flat_nominal) * scale,
-                    labels=_error_labels(error_mm, scale),
-                ).partition(lengths),
-                *rr.Arrows3D.columns(
-                    radii=[TARGET_RADIUS / 2] * n_poses,
-                    show_labels=[True] * n_poses,
-                    colors=[ERROR_COLOUR] * n_poses,
-                ),
-            ],
-        }
-        for part, cols in columns.items():
-            self._rec.send_columns(f"{root}/{part}", indexes=times, columns=cols)
-        if any(f"{root}/{part}" not in self._reference for part in columns):
-            first = self._target_archetypes(nominal[0], measured[0], scale)
-            for part, archetype in first.items():
-                self._reference.setdefault(f"{root}/{part}", [archetype])
-        self._note_targets(timeline, indices, nominal, group)
+        under ``world/targets/<group>`` (one 3D view per group, with ``machine``'s bodies)."""
+        self._log_targets(timeline, [int(index)], nominal, measured, scale, group, machine)
 
     @_active
     def log_poses(
@@ -371,35 +302,102 @@ class Recorder:
         nominal: np.ndarray,
         measured: np.ndarray,
         group: str,
-        scale: float = 100.0,
+        scale: float | None = None,
+        machine: str = "",
     ) -> None:
-        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3).
+        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3); the
+        error arrows magnified ``scale`` times (None: the 1-2-5 factor that draws the largest
+        error as a fifth of the targets' spread, recording_targets.arrow_scale).
 
         The bodies' transforms and the targets of all poses go out as one column per entity
-        (what :meth:`log_pose` and :meth:`log_targets` log pose by pose, in one call per
-        entity instead of one per entity and pose)."""
+        (what :meth:`log_pose` and :meth:`log_targets` log pose by pose)."""
         indices = [int(k) for k in indices]
         qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
         nominal, measured = np.asarray(nominal, dtype=float), np.asarray(measured, dtype=float)
-        shape = (len(indices), nominal.shape[1] if nominal.ndim == 3 else 0, 3)
-        if (
-            self._rec is not None
-            and len(indices) == len(qpos) > 0
-            and nominal.shape == measured.shape == shape
-            and shape[1] > 0
-        ):
-            self._log_bodies_columns(timeline, indices, mech, qpos)
-            self._log_targets_columns(timeline, indices, nominal, measured, scale, group)
-            return
-        for k, q, a, b in zip(indices, qpos, nominal, measured, strict=True):
-            self.log_pose(timeline, k, mech, q)
-            self.log_targets(timeline, k, a, b, scale=scale, group=group)
+        if nominal.ndim == 2:
+            nominal, measured = nominal[:, None], measured[:, None]
+        if not (len(indices) == len(qpos) == len(nominal) and nominal.shape == measured.shape):
+            raise ValueError(
+                f"{group}: {len(indices)} indices, {len(qpos)} configurations, targets "
+                f"{nominal.shape} and {measured.shape}: one of each per pose"
+            )
+        scale = arrow_scale(nominal, measured) if scale is None else float(scale)
+        self._log_bodies_columns(timeline, indices, mech, qpos, machine)
+        self._log_targets(timeline, indices, nominal, measured, scale, group, machine)
+
+    def _log_targets(
+        self,
+        timeline: str,
+        indices: list[int],
+        nominal: np.ndarray,
+        measured: np.ndarray,
+        scale: float,
+        group: str,
+        machine: str,
+    ) -> None:
+        """The targets of every pose (P, T, 3) in one column per entity."""
+        rr = self.rr
+        nominal = np.asarray(nominal, dtype=float).reshape(len(indices), -1, 3)
+        measured = np.asarray(measured, dtype=float).reshape(nominal.shape)
+        self.logged.use_timeline(timeline)
+        n_poses, n_targets = nominal.shape[:2]
+        lengths = [n_targets] * n_poses
+        flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
+        span = spread(nominal)
+        labels_at = label_positions(nominal, span).reshape(-1, 3)
+        times = [rr.TimeColumn(timeline, sequence=indices)]
+        part = entity_part(group)
+        root = f"world/targets/{part}"
+
+        def points(positions: np.ndarray, colour: list[int], radius: float) -> list[Any]:
+            return [
+                *rr.Points3D.columns(positions=positions).partition(lengths),
+                *rr.Points3D.columns(radii=[radius] * n_poses, colors=[colour] * n_poses),
+            ]
+
+        columns = {
+            "nominal": points(flat_nominal, NOMINAL_COLOUR, TARGET_RADIUS),
+            "measured": points(flat_measured, MEASURED_COLOUR, TARGET_RADIUS),
+            "error": [
+                *rr.Arrows3D.columns(
+                    origins=flat_nominal, vectors=(flat_measured - flat_nominal) * scale
+                ).partition(lengths),
+                *rr.Arrows3D.columns(
+                    radii=[ARROW_RADIUS] * n_poses, colors=[ERROR_COLOUR] * n_poses
+                ),
+            ],
+            "error_mm": [
+                *rr.Points3D.columns(
+                    positions=labels_at, labels=error_labels(flat_nominal, flat_measured)
+                ).partition(lengths),
+                *rr.Points3D.columns(
+                    radii=[TARGET_RADIUS / 3] * n_poses,
+                    colors=[ERROR_COLOUR] * n_poses,
+                    show_labels=[True] * n_poses,
+                ),
+            ],
+        }
+        for name, cols in columns.items():
+            self._rec.send_columns(f"{root}/{name}", indexes=times, columns=cols)
+        self.logged.machine_bounds.add(flat_nominal)
+        self.logged.poses.update(indices)
+        entry = self.logged.target_groups.setdefault(
+            part, TargetGroup(f"{group}: errors x{scale:g}", machine)
+        )
+        entry.bounds.add(flat_nominal)
+        entry.bounds.add(labels_at)
 
     @_active
     def _log_bodies_columns(
-        self, timeline: str, indices: list[int], mech: Mechanism, qpos: np.ndarray
+        self,
+        timeline: str,
+        indices: list[int],
+        mech: Mechanism,
+        qpos: np.ndarray,
+        machine: str = "",
     ) -> None:
         rr, m, d = self.rr, mech.model, mech.data
+        self.logged.use_timeline(timeline)
         xpos = np.empty((len(qpos), m.nbody, 3))
         xquat = np.empty((len(qpos), m.nbody, 4))
         for i, q in enumerate(qpos):
@@ -410,19 +408,12 @@ class Recorder:
         xyzw = xquat[:, :, [1, 2, 3, 0]]
         times = [rr.TimeColumn(timeline, sequence=indices)]
         for b in range(1, m.nbody):
-            path = self._body_path(m, b)
             self._rec.send_columns(
-                path,
+                self._body_path(m, b, machine),
                 indexes=times,
                 columns=rr.Transform3D.columns(translation=xpos[:, b], quaternion=xyzw[:, b]),
             )
-            if path not in self._reference:
-                self._reference[path] = [
-                    rr.Transform3D(
-                        translation=xpos[0, b], quaternion=rr.Quaternion(xyzw=xyzw[0, b])
-                    )
-                ]
-        self.logged.pose_timelines.setdefault(timeline, set()).update(indices)
+        self.logged.poses.update(indices)
 
     def log_pose_set(
         self,
@@ -431,12 +422,13 @@ class Recorder:
         commands: np.ndarray,
         poses: np.ndarray,
         group: str,
-        scale: float = 100.0,
+        scale: float | None = None,
+        machine: str = "",
     ) -> None:
         """The machine ``mech`` driven by ``commands`` (N, A) at pose k of ``timeline``, its
         targets against those of the commanded ``poses`` (N, 6) and the error arrows."""
         if self._rec is not None:
-            _log_pose_set(self, timeline, mech, commands, np.asarray(poses), group, scale)
+            _log_pose_set(self, timeline, mech, commands, np.asarray(poses), group, scale, machine)
 
     @_active
     def log_error_map(
@@ -536,13 +528,15 @@ class Recorder:
         s.indices.add(int(index))
 
     @_active
-    def log_bars(self, name: str, labels: Sequence[str], values: np.ndarray, unit: str) -> None:
-        """A static bar chart ``bars/<name>``; the view's name lists the bars in order."""
-        values = np.nan_to_num(np.asarray(values, dtype=float))
-        self._rec.log(f"bars/{name}", self.rr.BarChart(values), static=True)
-        self.logged.bars[f"bars/{name}"] = f"{name.replace('_', ' ')} ({unit}): " + ", ".join(
-            labels
-        )
+    def log_figure(self, name: str, png: bytes | str | Path, title: str) -> None:
+        """A static figure (PNG bytes, or a PNG file such as a report's figure) in a 2D view
+        titled ``title``: shown on any timeline, with the axes, names and log scales that a
+        plot of rerun's cannot draw. ``figures.png_bytes`` turns a matplotlib figure into it."""
+        data = Path(png).read_bytes() if isinstance(png, str | Path) else bytes(png)
+        path = f"figures/{entity_part(name)}"
+        image = self.rr.EncodedImage(contents=data, media_type="image/png")
+        self._rec.log(path, image, static=True)
+        self.logged.figures[path] = title
 
     @_active
     def log_text(self, path: str, markdown: str, name: str | None = None) -> None:
@@ -567,6 +561,14 @@ class Recorder:
         from scenarios.recording_loop import log_loop
 
         log_loop(self, mech, order, prediction, measured, after)
+
+    @_active
+    def log_causes(self, diag: Any, figure: Path | None, plots: list[Any], noise_mm: float) -> None:
+        """The loop's cause: one figure per named effect against the variable that explains
+        it (the diagnosis's own ``figure`` for the first), and the candidates held out."""
+        from scenarios.recording_loop import log_causes
+
+        log_causes(self, diag, figure, plots, noise_mm)
 
     @_active
     def log_verdict(
@@ -674,7 +676,8 @@ def _log_pose_set(
     commands: np.ndarray,
     poses: np.ndarray,
     group: str,
-    scale: float,
+    scale: float | None,
+    machine: str,
 ) -> None:
     from twin.kinematics import pose_to_frame
     from twin.kinematics_batch import forward_batch
@@ -683,5 +686,5 @@ def _log_pose_set(
     local = mech.target_local()
     nominal = np.einsum("nij,tj->nti", pose_to_frame(poses)[0], local) + poses[:, None, :3]
     rec.log_poses(
-        timeline, range(len(commands)), mech, sol.qpos, nominal, sol.targets, group, scale
+        timeline, range(len(commands)), mech, sol.qpos, nominal, sol.targets, group, scale, machine
     )
