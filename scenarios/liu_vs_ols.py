@@ -42,6 +42,7 @@ from scenarios.liu_vs_ols_pipeline import (
     score,
     stage_commands,
 )
+from scenarios.liu_vs_ols_recording import record
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from twin.kinematics_batch import forward_batch
@@ -156,7 +157,7 @@ def run(
         return run_draws(scenario, out_dir, progress, recorder)
     t_start = time.perf_counter()
     bench = make_bench(scenario)
-    nominal, params, truth = bench.machine.nominal, bench.machine.params, bench.machine.truth
+    nominal, params = bench.machine.nominal, bench.machine.params
     cal = calibrate(bench, scenario.get("fine.estimators", list), progress)
     problem, estimates = cal.problem, cal.estimates
     for m, (est, _) in estimates.items():
@@ -188,31 +189,19 @@ def run(
     with one_blas_thread():
         layers, maps = score(bench, poses, cmds)
 
-    recorder.log_mechanism(nominal)
-    test_poses = poses["test"]
-    for stage in ("coarse", "ols", "liu"):
-        if stage in cmds["test"]:
-            recorder.log_pose_set(
-                "test_node", truth, cmds["test"][stage], test_poses, f"test layer, {stage}"
-            )
-    for group, stages in maps.items():
-        for stage, (p, errs) in stages.items():
-            vmax = float(np.max(errs.position)) * 1e3  # each stage on its own colour scale
-            recorder.log_error_map(stage, group, p[:, :3], errs.position * 1e3, vmax)
     kept_names = [params.names[k] for k in problem.columns]
     shown = np.diag(
         params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
     )
-    for label, (est, _) in estimates.items():
-        recorder.log_parameters(label, kept_names, est.x * shown, est.std_errors * shown)
-    # bars, not a curve: a curve on its own timeline left the machine views empty when the
-    # viewer opened on it, and two or three points make no curve
-    changes = cal.coarse.relative_changes
-    recorder.log_bars(
-        "coarse_relative_change",
-        [f"round {k + 1}" for k in range(len(changes))],
-        changes,
-        "relative",
+    record(
+        recorder,
+        nominal,
+        maps,
+        estimates,
+        kept_names,
+        shown,
+        cal.coarse.relative_changes,
+        loop,
     )
 
     progress.step("Monte Carlo of the fine estimate (Eqs. 17-18)")
@@ -265,6 +254,8 @@ def run(
     summary["figures"] = {}
     if figures:
         summary["figures"] = _write_figures(out_dir, maps, estimates, kept_names, shown)
+        maps_png = out_dir / summary["figures"]["error_maps_position"]
+        recorder.log_figure("error_maps", maps_png, "error maps: every stage, every layer")
     summary["runtime_s"] = time.perf_counter() - t_start
     recorder.log_report(scenario.study, summary)
     return summary

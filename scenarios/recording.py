@@ -57,16 +57,15 @@ from scenarios.recording_blueprints import (
     build_blueprint,
 )
 from scenarios.recording_targets import (
-    TARGET_RADIUS,
     arrow_scale,
     error_labels,
     label_positions,
+    radii,
     spread,
 )
 from twin.mechanism import Mechanism
 
 ERROR_MAP_RADIUS = 0.004  # metres
-ARROW_RADIUS = 0.002  # metres
 NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
 PALETTE = [(220, 60, 50), (40, 110, 220), (40, 160, 80), (150, 80, 200), (230, 150, 30)]
 
@@ -344,6 +343,7 @@ class Recorder:
         lengths = [n_targets] * n_poses
         flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
         span = spread(nominal)
+        point_radius, arrow_radius = radii(span)
         labels_at = label_positions(nominal, span).reshape(-1, 3)
         times = [rr.TimeColumn(timeline, sequence=indices)]
         part = entity_part(group)
@@ -356,14 +356,14 @@ class Recorder:
             ]
 
         columns = {
-            "nominal": points(flat_nominal, NOMINAL_COLOUR, TARGET_RADIUS),
-            "measured": points(flat_measured, MEASURED_COLOUR, TARGET_RADIUS),
+            "nominal": points(flat_nominal, NOMINAL_COLOUR, point_radius),
+            "measured": points(flat_measured, MEASURED_COLOUR, point_radius),
             "error": [
                 *rr.Arrows3D.columns(
                     origins=flat_nominal, vectors=(flat_measured - flat_nominal) * scale
                 ).partition(lengths),
                 *rr.Arrows3D.columns(
-                    radii=[ARROW_RADIUS] * n_poses, colors=[ERROR_COLOUR] * n_poses
+                    radii=[arrow_radius] * n_poses, colors=[ERROR_COLOUR] * n_poses
                 ),
             ],
             "error_mm": [
@@ -371,7 +371,7 @@ class Recorder:
                     positions=labels_at, labels=error_labels(flat_nominal, flat_measured)
                 ).partition(lengths),
                 *rr.Points3D.columns(
-                    radii=[TARGET_RADIUS / 3] * n_poses,
+                    radii=[point_radius / 3] * n_poses,
                     colors=[ERROR_COLOUR] * n_poses,
                     show_labels=[True] * n_poses,
                 ),
@@ -487,6 +487,7 @@ class Recorder:
                 static=True,
             )
             bounds.add(centres)
+            bounds.add(ticks + np.array([0.3 * float(np.max(bounds.hi - bounds.lo)), 0.0, 0.0]))
         self.logged.error_maps[root] = ErrorMap(stage, layer, vmax, bounds)
 
     @_active

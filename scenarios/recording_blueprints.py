@@ -161,7 +161,7 @@ def machine_views(rrb: Any, log: Logged) -> list[Any]:
                 origin="world",
                 contents=contents,
                 name=group.name,
-                eye_controls=bounds.eye(rrb, distance=2.2),
+                eye_controls=bounds.eye(rrb, distance=2.6),
             )
         )
     shown = {g.machine for g in log.target_groups.values()}
@@ -188,7 +188,12 @@ def error_map_views(rrb: Any, log: Logged) -> Any | None:
             eye_controls=em.bounds.eye(rrb, direction=(0.35, -0.6, 1.0)),
         )
         by_layer.setdefault(em.layer, []).append(view)
-    rows = [_row(rrb, views, name=f"error maps: {layer}") for layer, views in by_layer.items()]
+    rows = [  # a row of a few maps; more in tabs, where each title has room
+        _row(rrb, views, name=f"error maps: {layer}")
+        if len(views) <= 4
+        else rrb.Tabs(*views, name=f"error maps: {layer}")
+        for layer, views in by_layer.items()
+    ]
     if not rows:
         return None
     return rows[0] if len(rows) == 1 else rrb.Tabs(*rows)
@@ -276,7 +281,7 @@ def build_blueprint(log: Logged) -> Any:
     elif len(columns) == 1:
         root = columns[0]
     else:
-        root = rrb.Horizontal(*columns, column_shares=[3.0, 2.0])
+        root = rrb.Horizontal(*columns, column_shares=[5.0, 4.0])
     timeline = log.timeline
     panels = [
         rrb.BlueprintPanel(state="collapsed"),

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-TARGET_RADIUS = 0.003  # metres
-ARROW_SHARE = 0.2  # the largest arrow as a share of the targets' spread
+TARGET_RADIUS = 0.003  # metres, at least
+ARROW_SHARE = 0.25  # the largest arrow as a share of the targets' spread
 LABEL_OFFSET = 0.08  # a label's distance from its target, as a share of the spread
 
 
@@ -46,6 +46,8 @@ def label_positions(nominal: np.ndarray, span: float) -> np.ndarray:
     out = p - p.mean(axis=1, keepdims=True)
     norm = np.linalg.norm(out, axis=-1, keepdims=True)
     out = np.where(norm > 1e-9, out / np.maximum(norm, 1e-300), 0.0)
+    if p.shape[1] == 1:  # a lone target: beside it, not over its arrow
+        out[..., :] = np.array([1.5, -1.5, 0.0])
     up = np.zeros_like(p)
     up[..., 2] = 0.5 + 0.5 * np.arange(p.shape[1])[None, :]
     return p + LABEL_OFFSET * span * (out + up)
@@ -55,3 +57,9 @@ def error_labels(nominal: np.ndarray, measured: np.ndarray) -> list[str]:
     """Each target's error in mm (flat over poses and targets)."""
     err = np.linalg.norm(np.asarray(measured) - np.asarray(nominal), axis=-1).ravel() * 1e3
     return [f"{e:.3f} mm" for e in err]
+
+
+def radii(span: float) -> tuple[float, float]:
+    """The radius of a target's point and of an error arrow (metres) for targets spread over
+    ``span``: about 1 % and 0.4 % of it, so that both are seen in a view framed on them."""
+    return max(TARGET_RADIUS, 0.01 * span), max(TARGET_RADIUS / 2, 0.004 * span)
