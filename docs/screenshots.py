@@ -1,6 +1,6 @@
 """Screenshots of the scenarios' recordings as a user opens them in rerun's web viewer.
 
-    make screenshots                       # every recording under results/ (run the scenarios first)
+    make screenshots          # every recording under results/ (run the scenarios first)
     .venv/bin/python docs/screenshots.py results/undeclared_effect/undeclared_effect.rrd \
         --out docs/img --wait 40 [--size 1600x1000]
 
