@@ -115,8 +115,10 @@ def sweep(
         bar.message(f"resuming: {len(results)} of {len(specs)} runs already done")
     n_failed = 0
     bar.update(len(results), n_failed)
+    where: dict[str, Any] | None = None
     if todo:
         eng = make_engine(engine, num_cpus)
+        where = getattr(eng, "cluster", None)  # Ray: the address joined (None: a local one)
         args = [
             (path, s.overrides, s.run_id, str(out), s.truth_seed, records[s.run_id]) for s in todo
         ]
@@ -150,6 +152,8 @@ def sweep(
 
     ordered = [{**results[s.run_id], "spec": records[s.run_id]} for s in specs]
     summary = aggregate(scenario.name, engine, swept, ordered)
+    if where is not None:
+        summary["ray"] = where  # {"address": RAY_ADDRESS or None, "cpus": the cluster's}
     figures = distribution_pngs(out, scenario.name, ordered)
     summary["figures"] = figures
     summary["recording"] = f"{scenario.name}_sweep.rrd"
