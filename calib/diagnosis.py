@@ -76,6 +76,7 @@ from calib.diagnosis_verdict import (
 )
 from calib.identify import IdentificationResult, Observations
 from calib.model import CalibrationModel
+from calib.rank_structure import describe
 from twin.kinematics_fast import on_one_blas_thread
 
 __all__ = [
@@ -184,14 +185,24 @@ def diagnose(
         tr = test_residual(model, values, result.estimated, test, tctx)
     test_of: dict[tuple[str, ...], np.ndarray] = {}
 
-    def test_rms(ev: Evaluation, cs: list[Candidate]) -> float | None:
+    def test_errs(ev: Evaluation, cs: list[Candidate]) -> np.ndarray | None:
         if tctx is None:
             return None
         if ev.names not in test_of:
             test_of[ev.names] = test_errors(tr, tctx, cs, ev)
-        return float(np.sqrt(np.mean(test_of[ev.names] ** 2)))
+        return test_of[ev.names]
 
-    sel = select_effects(prob, ctx, fold_sets, cands, n, alpha, min_gain, max_effects, test_rms)
+    def test_rms(ev: Evaluation, cs: list[Candidate]) -> float | None:
+        e = test_errs(ev, cs)
+        return None if e is None else float(np.sqrt(np.mean(e**2)))
+
+    excess = p_value < alpha
+    # within noise: a held-out mean-square gain below 3 standard deviations of the mean square
+    # of n rows of pure noise (chi-square: sigma^2 sqrt(2 / n))
+    noise_ms = None if excess else 3.0 * noise.sigma_m**2 * np.sqrt(2.0 / max(n, 1))
+    sel = select_effects(
+        prob, ctx, fold_sets, cands, n, alpha, min_gain, max_effects, test_errs, noise_ms
+    )
     notes += [f"{k} refused: {why}" for k, why in sel.refused.items()]
     base, singles = sel.base, sel.singles
     scores = {"none": score_of("none", base, prob, ctx, [], test_rms(base, []))}
@@ -204,7 +215,7 @@ def diagnose(
         residual_rms_mm=float(np.sqrt(sum_sq / n)) * 1e3,
         noise_floor_rms_mm=noise.sigma_m * 1e3,
         chi2_p_value=p_value,
-        excess=p_value < alpha,
+        excess=excess,
         scores=scores,
         structure=residual_structure(r, pred.targets, obs.commands, time, keep),
         noise=noise,
@@ -286,18 +297,21 @@ def diagnose(
             plot=plot_unexplained(ctx, r, keep, best_group, feats[best_group]),
         )
     test_block = None if tctx is None else {"before": before_stats, "after": before_stats}
+    chosen = "none"
     if not common["excess"]:
         reason = "the residual is what the tracker noise explains"
     else:
+        chosen = "unexplained"
         reason = (
-            "the residual exceeds the noise (chi-square) but no candidate, and no kernel "
-            "correction, lowers the held-out error: nothing is named"
+            f"the residual exceeds the noise (chi-square p = {p_value:.3g}) but no candidate, "
+            "and no kernel correction, lowers the held-out error; "
+            + describe(common["structure_detail"])
         )
     if sel.why_not:
         best = min(singles.values(), key=lambda e: e.heldout_rms_mm())
         if best.names and best.names[0] in sel.why_not:
             reason += f" (closest: {best.names[0]}, {sel.why_not[best.names[0]]})"
-    return Diagnosis(**common, reason=reason, notes=tuple(notes), test=test_block)
+    return Diagnosis(**common, chosen=chosen, reason=reason, notes=tuple(notes), test=test_block)
 
 
 def _schemes(ev: Evaluation) -> str:
