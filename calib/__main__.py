@@ -1,22 +1,28 @@
 """Command line for measured data (any machine: serial, parallel or hybrid).
 
     python -m calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
-                             [--out R.json] [--sigma-mm S] [--prior-std length=1,angle=0.1]
+                             [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
+                             [--with D.json]
     python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
                              [--set test] [--out V.json]
-    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--sigma-mm S]
-                             [--test T.csv] [--out D.json]
+    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
+                             [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
 frame or, for a sidecar with "frame": "tracker", with the tracker's registration estimated
-alongside. ``verify`` scores any set before (nominal) and after (identified): the 3D position
-error per reading (RMS, mean, max), a per-reading CSV and a PNG. ``diagnose`` asks whether the
-residual is more than the tracker noise and which physical effect explains it.
+alongside; directions the data determine worse than their physical range are kept at zero
+where that predicts held-out poses no worse (``--plain``: never). ``--with D.json`` adds the
+effect a diagnosis named to the error model. ``verify`` scores any set before (nominal) and
+after (identified): the 3D position error per reading (RMS, mean, max), a per-reading CSV and
+a PNG. ``diagnose`` asks whether the residual is more than the tracker noise and which
+physical effect explains it, judged on held-out poses.
 
-Exit codes (calib.verdict): 0 success; 2 bad input (the message names the cause); 3 the fit
-did not converge; 4 the data does not fit the model (residual far above the declared tracker
-accuracy, implausible estimates, or too many outliers; the likely cause is said); 130
+Exit codes (calib.verdict): 0 success (a residual above the tracker noise is said, not
+refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
+do not fit the model (a likely data error named, too many outliers, implausible estimates
+the data determine well, an implausible residual, or a residual above an explicit
+``--max-ratio``); verify of a result identify refused exits with identify's code; 130
 interrupted.
 """
 
@@ -227,6 +233,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=prior_spec,
         help="a Gaussian prior of zero mean on the errors, per kind: length=MM,angle=DEG "
         "(keeps weakly identified parameters physical)",
+    )
+    ident.add_argument(
+        "--plain",
+        action="store_true",
+        help="plain least squares over every identifiable parameter: keep no weakly "
+        "determined direction at zero (the default does so where cross-validation over the "
+        "poses says it predicts held-out readings no worse)",
     )
     ident.add_argument(
         "--with",

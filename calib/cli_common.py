@@ -79,6 +79,7 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
             max_iterations=args.max_iterations,
             unidentifiable="raise" if getattr(args, "require_all", False) else "fix",
             prior_spec=getattr(args, "prior_std", None),
+            regularise=not getattr(args, "plain", False),
         )
     except FitFailed as exc:
         return failed(exc)

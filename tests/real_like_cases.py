@@ -102,6 +102,7 @@ def arm_case(
     stiffness_Nm_per_rad: float = 5e4,
     noise: str = "gaussian 10 um",
     name: str = "arm",
+    effects: bool = True,
 ) -> Case:
     """A 6R arm (one or three reflectors) in a tracker frame 4.5 m away, DH errors of a built
     arm, its reflector nest(s) off by up to 0.4 mm, joints compliant under a payload."""
@@ -116,13 +117,14 @@ def arm_case(
         noise=TrackerNoise.from_spec(noise),
         rotation_rpy_rad=tuple(np.radians([0.4, -0.7, 100.0])),
     )
-    effects = [
+    physics = [
         JointCompliance(stiffness_Nm_per_rad=stiffness_Nm_per_rad, payload_kg=payload_kg),
         ReflectorOffset(magnitude_m=0.4e-3, seed=seed),
     ]
     commands = _arm_joints(nominal, n_cal + n_test, rng)
     out_dir.mkdir(parents=True, exist_ok=True)
-    data = _write(truth, commands, n_cal, tracker, effects, sigma_mm, out_dir / f"{name}.csv", rng)
+    path = out_dir / f"{name}.csv"
+    data = _write(truth, commands, n_cal, tracker, physics if effects else [], sigma_mm, path, rng)
     return Case(model, errors, data, sigma_mm)
 
 
