@@ -14,8 +14,11 @@
    physical explains a residual that a kernel correction over some pose variable does
    explain on held-out poses, the answer is "unexplained: correlated with <variable>".
 
-The naming depends on held-out errors only, never on the sigma: the chi-square is reported,
-and the verdict is the same for any plausible sigma.
+The naming depends on held-out errors, and on the sigma in one place only: when the residual
+passes the chi-square noise test, an effect must also lower the held-out mean square by more
+than the noise moves it (three standard deviations of the mean square of pure noise), so that
+the verdict is consistent with its own test ("none" otherwise). Nothing named where the
+residual exceeds the noise is "unexplained", with the structure the residual shows.
 
 Modules: the candidates (calib.diagnosis_candidates) and what they see of each pose
 (calib.diagnosis_context, calib.diagnosis_gravity); fitting and nested cross-validation
