@@ -63,7 +63,8 @@ def report(s: dict[str, Any]) -> str:
     ]
     if "with_effect" in s:
         lines.append(
-            f"| geometry and effect refitted (identify --with) | {_pair(s['with_effect']['test'])} |"
+            "| geometry and effect refitted (identify --with) | "
+            f"{_pair(s['with_effect']['test'])} |"
         )
     lines += [
         "",

@@ -186,6 +186,8 @@ def test_diagnose_names_nothing_on_noise(capsys, tmp_path):
     assert d["effect"]["added_parameters"] == []
     t = d["test"]
     assert t["after"] == t["before"]
+    code, text = _cli(capsys, "identify", *_files(case), "--with", out)
+    assert code == 2 and "there is nothing to add" in text
 
 
 def test_identify_leaves_full_rank_fits_alone(capsys, tmp_path):
@@ -206,3 +208,48 @@ def test_identify_leaves_full_rank_fits_alone(capsys, tmp_path):
     plain = calibrate(model, ds, "calibration", regularise=False)
     assert default.result.subspace is not None and default.result.subspace.basis is None
     np.testing.assert_array_equal(default.result.values, plain.result.values)
+
+
+def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
+    """One leg's revolution-to-mm factor 3 % off: diagnose names the gain, writes it as error
+    model parameters, identify --with fits geometry and gains together, verify scores it."""
+    diag = tmp_path / "d.json"
+    code, text = _cli(capsys, "diagnose", *_files(stewart), "--test-set", "test", "--out", diag)
+    assert code == EXIT_OK, text
+    d = json.loads(diag.read_text())
+    assert d["diagnosed_effect"] == "gain_error"
+    added = d["effect"]["added_parameters"]
+    assert [a["kind"] for a in added] == ["actuator_gain"] * 6
+    result, verified = tmp_path / "rw.json", tmp_path / "vw.json"
+    code, text = _cli(
+        capsys,
+        "identify",
+        *_files(stewart),
+        "--set",
+        "calibration",
+        "--with",
+        diag,
+        "--out",
+        result,
+    )
+    assert code == EXIT_OK, text
+    r = json.loads(result.read_text())
+    gain = r["parameters"]["leg2.gain"]
+    assert gain["unit"] == "ppm" and abs(gain["value"] - 3e4) < 3 * gain["std"]
+    assert r["added_parameters"] == added and r["with"] == str(diag)
+    code, text = _cli(
+        capsys,
+        "verify",
+        *_files(stewart),
+        "--result",
+        result,
+        "--set",
+        "test",
+        "--out",
+        verified,
+    )
+    assert code == EXIT_OK, text
+    after = json.loads(verified.read_text())["after"]
+    geometric = d["test"]["before"]
+    assert after["rms_mm"] < 0.9 * geometric["rms_mm"]
+    assert after["max_mm"] < geometric["max_mm"]
