@@ -17,15 +17,15 @@ from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import inverse
 from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
-from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.workspace import commands_for_poses
 
 
 def compensated_commands(
     model: CalibrationModel, values: np.ndarray, poses: np.ndarray
 ) -> np.ndarray:
-    """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected."""
-    return commands_for_poses(model.mechanism(values), poses)
+    """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected
+    (through its actuator gains, if it has any)."""
+    return model.commands_for_joints(values, commands_for_poses(model.mechanism(values), poses))
 
 
 def reachable_compensated_commands(
@@ -39,7 +39,7 @@ def reachable_compensated_commands(
     ok = np.zeros(len(poses), dtype=bool)
     for i, pose in enumerate(np.atleast_2d(poses)):
         try:
-            out[i] = commands_for_poses(mech, pose[None])[0]
+            out[i] = model.commands_for_joints(values, commands_for_poses(mech, pose[None]))[0]
             ok[i] = True
         except (WorkspaceError, ClosureError):
             continue
@@ -85,7 +85,7 @@ class TwistCompensation:
             q = None
             for i, pose in enumerate(poses):  # each pose started from the previous solution
                 q = qpos[i] = inverse(mech, pose, start=q).qpos
-        jac = tool_twist_jacobian_batch(mech, model.params, base_values, qpos)
+        jac = model.tool_twist_jacobian(base_values, qpos)
         return cls(model, base_values, poses, qpos, jac, actuator_twist_jacobians(mech, qpos))
 
     def commands(self, delta: np.ndarray, columns: np.ndarray) -> np.ndarray:
@@ -96,7 +96,8 @@ class TwistCompensation:
         corrected = corrected_poses(self.poses, twists)
         # every pose at once, each from its first inverse kinematics (the same exact inverse
         # kinematics as twin.kinematics.inverse, to round-off; the same errors)
-        return inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
+        joints = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
+        return self.model.commands_for_joints(self.base_values, joints)
 
 
 def twist_compensated_commands(
