@@ -25,6 +25,7 @@ CHECKED = {
     "optimal_poses": "test_pose_selection",
     "serial_arm": "test_recording",
     "polisher_identifiability": "test_recording",
+    "measured_loop": "test_recording",
     "diagnosis_benchmark": "test_diagnosis_benchmark",
     "sweep": "test_sweep",
 }
