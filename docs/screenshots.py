@@ -21,6 +21,7 @@ import contextlib
 import json
 import os
 import shutil
+import signal
 import socket
 import struct
 import subprocess
@@ -239,7 +240,7 @@ def screenshots(rrd: Path, out_dir: Path, wait: float, size: str) -> list[Path]:
                                 button="left",
                                 clickCount=1,
                             )
-                        time.sleep(min(wait, 10.0))
+                        time.sleep(max(10.0, wait / 2))  # the views follow the cursor
                     shot = tools.call("Page.captureScreenshot", format="png")
                 finally:
                     tools.close()
@@ -256,6 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--wait", type=float, default=40.0, help="seconds for the viewer to draw")
     ap.add_argument("--size", default="1600x1000")
     args = ap.parse_args(argv)
+    # stopped (SIGTERM): leave through the context managers, which stop Chromium and rerun
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     recordings = args.recordings or sorted((ROOT / "results").glob("*/*.rrd"))
     if not recordings:
         sys.exit("no recordings: run the scenarios first (make scenario NAME=...)")

@@ -286,10 +286,10 @@ def build_blueprint(log: Logged) -> Any:
     panels = [
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        # no timeline: nothing to scrub through (an empty TimePanel() was a chunk rerun
-        # dropped with a warning, leaving the panel open)
+        # paused on the first pose; no timeline: nothing to scrub through, no panel (it
+        # would offer the viewer's own wall-clock timeline, with nothing on it)
         rrb.TimePanel(state="collapsed", timeline=timeline, play_state="paused")
         if timeline
-        else rrb.TimePanel(state="collapsed"),
+        else rrb.TimePanel(state="hidden"),
     ]
     return rrb.Blueprint(root, *panels, auto_layout=False, auto_views=False)

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 TARGET_RADIUS = 0.003  # metres, at least
-ARROW_SHARE = 0.25  # the largest arrow as a share of the targets' spread
+ARROW_SHARE = 0.4  # the largest arrow as a share of the targets' spread
 LABEL_OFFSET = 0.08  # a label's distance from its target, as a share of the spread
 
 
@@ -26,7 +26,7 @@ def spread(nominal: np.ndarray, least: float = 0.05) -> float:
 
 
 def arrow_scale(nominal: np.ndarray, measured: np.ndarray) -> float:
-    """A 1-2-5 magnification that draws the largest error as about a fifth of the targets'
+    """A 1-2-5 magnification that draws the largest error as at most 40 % of the targets'
     spread over all poses (errors of micrometres on a machine of a metre stay visible)."""
     err = np.linalg.norm(np.asarray(measured) - np.asarray(nominal), axis=-1)
     largest = float(np.max(err[np.isfinite(err)], initial=0.0))
@@ -61,5 +61,5 @@ def error_labels(nominal: np.ndarray, measured: np.ndarray) -> list[str]:
 
 def radii(span: float) -> tuple[float, float]:
     """The radius of a target's point and of an error arrow (metres) for targets spread over
-    ``span``: about 1 % and 0.4 % of it, so that both are seen in a view framed on them."""
-    return max(TARGET_RADIUS, 0.01 * span), max(TARGET_RADIUS / 2, 0.004 * span)
+    ``span``: about 1 % and 0.6 % of it, so that both are seen in a view framed on them."""
+    return max(TARGET_RADIUS, 0.01 * span), max(TARGET_RADIUS / 2, 0.006 * span)

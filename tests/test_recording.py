@@ -292,7 +292,7 @@ def test_arrows_are_magnified_to_be_seen_and_labels_set_apart():
     measured = nominal + np.array([0.0, 0.0, 30e-6])  # 30 um on a 0.2 m target set
     scale = arrow_scale(nominal, measured)
     assert scale in (1e3, 2e3, 5e3)  # a 1-2-5 factor
-    assert 0.1 * 0.2 <= 30e-6 * scale <= 0.25 * 0.2  # the arrow a tenth to a quarter of it
+    assert 0.16 * 0.2 <= 30e-6 * scale <= 0.4 * 0.2  # the arrow 16-40 % of the spread
     at = label_positions(nominal, 0.2)[0]
     gaps = np.linalg.norm(at[:, None] - at[None], axis=-1)[np.triu_indices(3, 1)]
     assert gaps.min() > 0.02  # apart from each other
