@@ -322,15 +322,12 @@ def test_scenario_recordings_show_data_in_every_face(tmp_path, name):
 
 def test_recording_faces_cover_every_study():
     """Every study's recording is read back face by face by some test module."""
-    import importlib
-
     from scenarios.runner import STUDIES
 
     assert set(STUDIES) | {"liu_vs_ols_draws", "sweep"} == set(CHECKED)
     for module in set(CHECKED.values()):
         text = (ROOT / "tests" / f"{module}.py").read_text()
         assert "assert_every_face_has_data(" in text, module
-        importlib.import_module("recording_faces")
 
 
 def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
