@@ -13,6 +13,7 @@ import pytest
 from scenarios.hexapod_report import (
     deviation_sentence,
     largest_deviation_p,
+    noise_free_sentence,
     report,
     truth_sentence,
 )
@@ -91,3 +92,17 @@ def _paper() -> dict:
     from scenarios.hexapod_paper import PAPER
 
     return PAPER
+
+
+def test_the_noise_free_sentence_follows_the_recovery():
+    exact = {**CASE, "n_poses": 9, "max_abs_mm": 2.5e-10, "residual_rms_mm": 1e-13}
+    assert "recovers the errors to round-off (largest deviation 2.5e-10 mm)" in (
+        noise_free_sentence(exact)
+    )
+    other_root = {**exact, "max_abs_mm": 3.2, "worst_parameter": "leg2.length"}
+    text = noise_free_sentence(other_root)
+    assert "does not recover" in text and "3.2 mm on leg2.length" in text
+    assert "another exact root" in text
+    short = {**other_root, "residual_rms_mm": 0.01}
+    assert "stopped short" in noise_free_sentence(short)
+    assert "54 equations" in noise_free_sentence(exact)
