@@ -14,6 +14,8 @@ import numpy as np
 TARGET_RADIUS = 0.003  # metres, at least
 ARROW_SHARE = 0.4  # the largest arrow as a share of the targets' spread
 LABEL_OFFSET = 0.08  # a label's distance from its target, as a share of the spread
+# the machine views look along -(1, -1.3, 0.8) (recording_blueprints.Bounds.eye): to their right
+SCREEN_RIGHT = np.array([1.3, 1.0, 0.0]) / np.hypot(1.3, 1.0)
 
 
 def spread(nominal: np.ndarray, least: float = 0.05) -> float:
@@ -46,8 +48,8 @@ def label_positions(nominal: np.ndarray, span: float) -> np.ndarray:
     out = p - p.mean(axis=1, keepdims=True)
     norm = np.linalg.norm(out, axis=-1, keepdims=True)
     out = np.where(norm > 1e-9, out / np.maximum(norm, 1e-300), 0.0)
-    if p.shape[1] == 1:  # a lone target: beside it, not over its arrow
-        out[..., :] = np.array([1.5, -1.5, 0.0])
+    if p.shape[1] == 1:  # a lone target: to its right as the machine views look, not on it
+        out[..., :] = 2.0 * SCREEN_RIGHT
     up = np.zeros_like(p)
     up[..., 2] = 0.5 + 0.5 * np.arange(p.shape[1])[None, :]
     return p + LABEL_OFFSET * span * (out + up)
