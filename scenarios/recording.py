@@ -1,9 +1,12 @@
 """A rerun recording of a scenario: the machine, the targets, the errors, the estimates.
 
-Headless by default: the recording is saved to a ``.rrd`` file (``rec.save`` before any
-logging, ``rec.disconnect`` on ``close`` to write the footer); ``spawn_viewer`` also opens the
-viewer. A Recorder made with no path and no viewer does nothing, cheaply (rerun is not even
-imported). See docs/recordings.md for what each scenario's recording looks like.
+Headless by default: the recording is encoded in memory (``rec.binary_stream`` before any
+logging) and written to its ``.rrd`` file on ``close`` by Python, atomically, so that a full
+disk raises an OSError instead of stalling rerun's own file writer (it deadlocked after "No
+space left on device"); the flush waits at most FLUSH_TIMEOUT_S. ``spawn_viewer`` also opens
+the viewer (then rerun saves the file itself, as before). A Recorder made with no path and
+no viewer does nothing, cheaply (rerun is not even imported). See docs/recordings.md for
+what each scenario's recording looks like.
 
 What a study logs, and where:
 
@@ -43,9 +46,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from calib.atomic_files import write_bytes_atomic
 from scenarios.recording_blueprints import Bounds, ErrorMap, Logged, Series, build_blueprint
 from twin.mechanism import Mechanism
 
+FLUSH_TIMEOUT_S = 120.0  # encoding a recording of a few MB takes well under a second
 ERROR_MAP_RADIUS = 0.004  # metres
 TARGET_RADIUS = 0.003  # metres
 NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
@@ -137,6 +142,7 @@ class Recorder:
         self.enabled = self.path is not None or spawn_viewer
         self.logged = Logged()
         self._rec: Any = None
+        self._stream: Any = None
         self._want_blueprint = False
         self._home: Mechanism | None = None
         self._reference: dict[str, list[Any]] = {}  # entity -> its first pose's archetypes
@@ -148,9 +154,11 @@ class Recorder:
         self.rr = rr
         self._strict = default_strict_mode()  # RERUN_STRICT as it is now, not at import
         self._rec = rr.RecordingStream(app_id)
-        if self.path is not None:
+        if self.path is not None and spawn_viewer:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path)
+        elif self.path is not None:
+            self._stream = self._rec.binary_stream()
         if spawn_viewer:
             self._rec.spawn()
 
@@ -163,11 +171,17 @@ class Recorder:
     def close(self) -> None:
         """Finish (series styles, the machine on the active timeline, the blueprint), flush
         and write the footer (a file without it cannot be read back)."""
-        if self._rec is not None:
+        if self._rec is None:
+            return
+        try:
             with self._checked():
                 self._finish()
+            if self._stream is not None:
+                data = self._stream.read(flush=True, flush_timeout_sec=FLUSH_TIMEOUT_S)
+                write_bytes_atomic(self.path, data or b"")
+        finally:
             self._rec.disconnect()
-            self._rec = None
+            self._rec = self._stream = None
 
     def _checked(self) -> contextlib.AbstractContextManager[Any]:
         if not self._strict:
