@@ -26,18 +26,19 @@ import argparse
 import csv
 import io
 import math
+import os
 import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import write_json_atomic, write_text_atomic
-from calib.dataset import DatasetError, read_dataset
+from calib.atomic_files import json_text
+from calib.dataset import DatasetError, read_dataset, sidecar_path
 from calib.exceptions import CalibError
 from calib.identify import model_from_files
 from calib.prior import PriorSpec
-from calib.result_file import load_result, write_result
+from calib.result_file import load_result, result_text
 from calib.verdict import (
     DEFAULT_MAX_RATIO,
     EXIT_BAD_INPUT,
@@ -53,6 +54,7 @@ from calib.workflow import (
     result_content,
     verify_result,
 )
+from calib.write_set import write_files
 from twin.exceptions import TwinError
 
 
@@ -177,7 +179,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     _print_run(run)
     _print_verdict(run.verdict)
     if args.out:
-        write_result(args.out, result_content(run, args.model, args.errors, args.data))
+        content = result_content(run, args.model, args.errors, args.data)
+        write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
 
 
@@ -204,13 +207,18 @@ def cmd_verify(args: argparse.Namespace) -> int:
             line += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
         print(line)
     if args.out:
-        out = Path(args.out)
-        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
-        write_json_atomic(out, {**content, **v.as_dict(), "selection": selection})
-        write_text_atomic(out.with_suffix(".csv"), _csv_text(v.rows()))
         from calib.verify_figure import save_verification_png
 
-        save_verification_png(v, out.with_suffix(".png"))
+        out = Path(args.out)
+        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
+        write_files(  # the three files together, or none of them
+            {
+                out: json_text({**content, **v.as_dict(), "selection": selection}),
+                out.with_suffix(".csv"): _csv_text(v.rows()),
+                out.with_suffix(".png"): lambda tmp: save_verification_png(v, tmp),
+            },
+            make_parents=True,
+        )
         print(f"wrote {out}, {out.with_suffix('.csv')} and {out.with_suffix('.png')}")
     return EXIT_OK
 
@@ -336,11 +344,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                 side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
                 for side in ("before", "after")
             }
+        files: dict = {}
         if diag.plot is not None:
             from calib.diagnosis_figure import save_diagnosis_png
 
-            content["figure"] = str(save_diagnosis_png(diag, out.with_suffix(".png")))
-        write_json_atomic(out, content)
+            content["figure"] = str(out.with_suffix(".png"))
+            files[out.with_suffix(".png")] = lambda tmp: save_diagnosis_png(diag, tmp)
+        write_files({out: json_text(content), **files}, make_parents=True)  # both, or neither
     return EXIT_OK
 
 
@@ -428,11 +438,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
+WRITTEN_BESIDE = {"identify": (), "verify": (".csv", ".png"), "diagnose": (".png",)}
+
+
+def check_out(args: argparse.Namespace) -> None:
+    """Refuse, before any work, an ``--out`` whose files would overwrite an input or each
+    other (``verify --out v.csv``) or that names a folder."""
+    if not args.out:
+        return
+    out = Path(args.out)
+    outs = [out, *(out.with_suffix(s) for s in WRITTEN_BESIDE[args.command])]
+    if len(set(outs)) < len(outs):
+        beside = " and ".join(WRITTEN_BESIDE[args.command])
+        raise ValueError(
+            f"--out {out}: name the JSON file (e.g. {out.with_suffix('.json').name}); the "
+            f"{beside} files are written beside it with the same name"
+        )
+    if out.is_dir():
+        raise ValueError(f"--out {out} is a folder; name the JSON file to write")
+    inputs = [args.model, args.errors, args.data, getattr(args, "result", None)]
+    inputs += [getattr(args, "test", None)]
+    inputs += [str(sidecar_path(p)) for p in (args.data, getattr(args, "test", None)) if p]
+    for o in outs:
+        for i in inputs:
+            if i and o.exists() and Path(i).exists() and os.path.samefile(o, i):
+                raise ValueError(f"--out would overwrite the input file {i}")
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        check_out(args)
         return COMMANDS[args.command](args)
     except (DatasetError, CalibError, TwinError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

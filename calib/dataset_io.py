@@ -1,7 +1,7 @@
 """CSV + JSON sidecar reading and writing for :mod:`calib.dataset`.
 
 File units are millimetres and degrees; the returned :class:`~calib.dataset.Dataset`
-is SI. Both files are written atomically (temporary sibling, then ``os.replace``), with the
+is SI. Both files are written as one set (:mod:`calib.write_set`: both or neither), with the
 mode of an ordinary file (0644 less the umask). Both are read as UTF-8 (a UTF-8 byte-order
 mark is accepted); another encoding, another delimiter than ',' or a malformed cell raises
 :class:`~calib.dataset.DatasetError` naming the file, line and column.
@@ -9,20 +9,17 @@ mark is accepted); another encoding, another delimiter than ',' or a malformed c
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import ordinary_mode
 from calib.dataset import (
     ACTUATOR_UNITS,
     FORMAT,
@@ -32,6 +29,7 @@ from calib.dataset import (
     check_names,
     sidecar_path,
 )
+from calib.write_set import write_files
 from twin.parameter_file import closest, read_utf8
 
 CMD_PREFIX = "cmd:"
@@ -62,29 +60,6 @@ def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
-
-
-def _atomic_write(files: Sequence[tuple[Path, str]]) -> None:
-    """Write every file to a temporary sibling first, then ``os.replace`` each in turn.
-
-    The files get the mode of an ordinary new file (0644 less the umask), also when they
-    replace an existing file."""
-    temps: list[tuple[str, Path]] = []
-    try:
-        for target, text in files:
-            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-            temps.append((tmp, target))
-            with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-                fh.write(text)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.chmod(tmp, ordinary_mode())  # 0644 less umask, like open(); not mkstemp's 0600
-        for tmp, target in temps:
-            os.replace(tmp, target)
-    finally:
-        for tmp, _ in temps:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
 
 
 def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Path:
@@ -127,7 +102,7 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
         if getattr(ds, key) is not None:
             sidecar[key] = getattr(ds, key)
     text = json.dumps(sidecar, indent=2, ensure_ascii=False, allow_nan=False, default=_json_default)
-    _atomic_write([(path, buf.getvalue()), (sidecar_path(path), text + "\n")])
+    write_files({path: buf.getvalue(), sidecar_path(path): text + "\n"})  # both, or neither
     return path
 
 

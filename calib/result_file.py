@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import write_json_atomic
+from calib.atomic_files import json_text, write_json_atomic
 from calib.exceptions import CalibError
 from calib.prior import correlation_matrix
 from calib.registration import Registration, RegistrationError
@@ -67,8 +67,14 @@ def correlation_pairs(
     return sorted(out, key=lambda p: -abs(p["r"]))
 
 
+def result_text(content: dict[str, Any]) -> str:
+    """The file's text: ``content`` (the keys of :func:`calib.__main__`'s identify) with
+    format tags, as strict JSON."""
+    return json_text({"format": FORMAT, "version": VERSION, **content})
+
+
 def write_result(path: str | os.PathLike[str], content: dict[str, Any]) -> Path:
-    """Write ``content`` (the keys of :func:`calib.__main__`'s identify) with format tags."""
+    """Write :func:`result_text` of ``content`` atomically."""
     return write_json_atomic(path, {"format": FORMAT, "version": VERSION, **content})
 
 
