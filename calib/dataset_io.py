@@ -36,6 +36,10 @@ CMD_PREFIX = "cmd:"
 REQUIRED_COLUMNS = ("pose_id", "set", "target", "repeat", "x_mm", "y_mm", "z_mm")
 OPTIONAL_COLUMNS = ("order", "time_s")
 POSE_COLUMNS = ("pose_x_mm", "pose_y_mm", "pose_z_mm", "pose_rx_deg", "pose_ry_deg", "pose_rz_deg")
+INT64 = (-(2**63), 2**63 - 1)  # pose_id, repeat and order are stored as int64
+# No laser tracker or motion-capture system measures a machine from a kilometre away (trackers
+# reach 80-160 m): a reading beyond it is an export error (and its square overflows the fit)
+MAX_READING_MM = 1e6
 _SIDECAR_REQUIRED = ("format", "version", "model", "frame", "length_unit", "angle_unit")
 _SIDECAR_KEYS = {*_SIDECAR_REQUIRED, "actuators", "targets", "notes", "tracker", "meta"}
 
@@ -194,6 +198,13 @@ def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[st
     pose = [c for c in POSE_COLUMNS if c in header]
     known = {*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS, *POSE_COLUMNS, *declared}
     unknown = [h for h in header if h not in known and h not in undeclared]
+    if not set(header) & ({*known, *undeclared} - set(OPTIONAL_COLUMNS)):
+        shown = ",".join(header)
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        raise DatasetError(
+            f"{path}: not a dataset CSV: its first line {shown!r} names none of the columns "
+            f"of the format ({', '.join(REQUIRED_COLUMNS)}, cmd:<actuator> ...)"
+        )
     for bad, what in (
         (dups, "duplicate column(s)"),
         (missing, "missing required column(s)"),
@@ -217,6 +228,16 @@ def _number(loc: str, column: str, text: str, integer: bool = False) -> float:
         raise DatasetError(f"{loc}, column {column!r}: expected {kind}, got {text!r}") from None
     if not math.isfinite(value):
         raise DatasetError(f"{loc}, column {column!r}: non-finite value {text!r}")
+    if integer and not INT64[0] <= value <= INT64[1]:
+        raise DatasetError(
+            f"{loc}, column {column!r}: {text} is outside the range of a 64-bit integer "
+            f"[{INT64[0]}, {INT64[1]}]"
+        )
+    if column.endswith("_mm") and abs(value) > MAX_READING_MM:
+        raise DatasetError(
+            f"{loc}, column {column!r}: {value:g} mm is beyond {MAX_READING_MM:g} mm (1 km), "
+            "no reading of a machine; check the export"
+        )
     return value
 
 
@@ -311,7 +332,7 @@ def read_csv_dataset(
         if not any(header):
             raise DatasetError(f"{path}: empty file (no header and no data rows)")
         delimiter = _other_delimiter(header)
-        if delimiter is not None:
+        if delimiter is not None and set(header[0].split(delimiter)) & set(REQUIRED_COLUMNS):
             raise DatasetError(f"{path} line {reader.line_num}: {_delimiter_message(delimiter)}")
         col = _columns(path, header, acts)
         rows = [(reader.line_num, r) for r in reader if any(c.strip() for c in r)]

@@ -42,7 +42,14 @@ _NO_MASS = "mass and inertia of moving bodies must be larger than mjMINVAL"
 def compile_spec(spec: mujoco.MjSpec, where: str) -> tuple[mujoco.MjModel, bool]:
     """Compile; if MuJoCo refuses bodies without mass, again with bounded defaults.
 
-    Returns the model and whether masses were defaulted."""
+    Returns the model and whether masses were defaulted. A model without ``<actuator>`` is
+    refused first (MuJoCo would name only a consequence, e.g. a keyframe's ctrl size)."""
+    if len(spec.actuators) == 0:
+        raise ModelError(
+            f"{where}: model '{spec.modelname}' has no <actuator>: nothing to command; "
+            "calibration needs one actuator per commanded joint (a dataset's cmd:<name> "
+            "columns name them)"
+        )
     try:
         return spec.compile(), False
     except ValueError as exc:
