@@ -44,6 +44,7 @@ from calib.verdict import (
     EXIT_BAD_INPUT,
     EXIT_OK,
     EXIT_POOR_FIT,
+    MAX_SIGMA_MM,
     Verdict,
 )
 from calib.workflow import (
@@ -66,6 +67,17 @@ def positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return value
+
+
+def sigma_float(text: str) -> float:
+    """argparse type: a tracker accuracy in mm, finite, > 0 and at most MAX_SIGMA_MM."""
+    value = positive_float(text)
+    if value > MAX_SIGMA_MM:
+        raise argparse.ArgumentTypeError(
+            f"{value:g} mm is beyond {MAX_SIGMA_MM:g} mm: no measuring system of a machine is "
+            "that coarse (the value is in millimetres per coordinate)"
+        )
     return value
 
 
@@ -393,7 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
     _fit_options(ident)
     ident.add_argument(
         "--sigma-mm",
-        type=positive_float,
+        type=sigma_float,
         help="tracker accuracy per coordinate (mm); default: the sidecar's tracker.sigma_mm, "
         "else 0.05 mm assumed",
     )
@@ -425,7 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
     _fit_options(diag)
     diag.add_argument(
         "--sigma-mm",
-        type=positive_float,
+        type=sigma_float,
         help="tracker noise per coordinate (mm); default: from the repeat readings, else the "
         "sidecar's tracker.sigma_mm; a typed value is checked against the repeats",
     )

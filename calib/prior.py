@@ -49,6 +49,8 @@ class PriorSpec:
                 raise ValueError(f"prior '{part}': {raw.strip()!r} is not a number") from None
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"prior '{part}': the standard deviation must be > 0")
+            if key in values:
+                raise ValueError(f"prior '{text}': '{key}' is given twice; give each kind once")
             values[key] = v
         if not values:
             raise ValueError("an empty prior: give length=... and/or angle=...")

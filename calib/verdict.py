@@ -33,6 +33,9 @@ DEFAULT_MAX_RATIO = 10.0
 PLAUSIBLE_MM = 50.0
 PLAUSIBLE_DEG = 20.0
 ASSUMED_SIGMA_MM = 0.05  # per coordinate: a laser tracker at a few metres plus repeatability
+# a tracker, motion capture or measuring arm is accurate to a few millimetres at worst; a
+# declared accuracy beyond this is a unit or typing mistake that would pass any fit
+MAX_SIGMA_MM = 100.0
 
 
 @dataclass(frozen=True)
@@ -45,6 +48,12 @@ class Accuracy:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sigma_mm) and self.sigma_mm > 0):
             raise ValueError(f"tracker accuracy must be a positive number, got {self.sigma_mm!r}")
+        if self.sigma_mm > MAX_SIGMA_MM:
+            raise ValueError(
+                f"tracker accuracy {self.sigma_mm:g} mm per coordinate ({self.source}) is beyond "
+                f"{MAX_SIGMA_MM:g} mm: no measuring system of a machine is that coarse (the "
+                "value is in millimetres)"
+            )
 
 
 def declared_accuracy(cli_sigma_mm: float | None, tracker_info: dict[str, Any] | None) -> Accuracy:

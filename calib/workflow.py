@@ -21,7 +21,12 @@ from calib.identify import IdentificationResult, Observations, bind_dataset, ide
 from calib.model import CalibrationModel
 from calib.position_error import stats_mm
 from calib.prior import Prior, PriorSpec, collinear_groups, weakly_identified
-from calib.result_file import CalibrationResult, ResultFileError, correlation_pairs
+from calib.result_file import (
+    CalibrationResult,
+    ResultFileError,
+    correlation_pairs,
+    unusable_values,
+)
 from calib.verdict import (
     DEFAULT_MAX_RATIO,
     Accuracy,
@@ -30,6 +35,7 @@ from calib.verdict import (
     implausible_estimates,
     judge_fit,
 )
+from calib.verdict_notes import with_notes
 from calib.verify import Verification, verify
 from twin.exceptions import TwinError
 
@@ -151,7 +157,7 @@ def judge(
             tuple(_hints(model, obs)),
             odd,
         )
-    return verdict, stats.as_dict()
+    return with_notes(verdict, result, *obs.measured.shape[:2]), stats.as_dict()
 
 
 def rejected_rows(run: CalibrationRun) -> list[dict[str, Any]]:
@@ -238,15 +244,18 @@ def verify_result(
         if loaded.registration is None:
             raise ResultFileError(f"{loaded.path}: tracker-frame result without registration")
         calibration = _calibration_set(model, loaded)
-    v = verify(
-        model,
-        values,
-        obs.commands,
-        obs.measured,
-        picked.pose_ids,
-        registration_after=loaded.registration,
-        calibration_set=calibration,
-    )
+    try:
+        v = verify(
+            model,
+            values,
+            obs.commands,
+            obs.measured,
+            picked.pose_ids,
+            registration_after=loaded.registration,
+            calibration_set=calibration,
+        )
+    except TwinError as exc:  # e.g. no closure at the result's values: name the odd ones
+        raise unusable_values(loaded, model.params, exc) from None
     return v, selection
 
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from twin.parameter_file import read_utf8
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCENARIO_DIR = Path(__file__).resolve().parent
 
@@ -365,7 +367,11 @@ def _check_truth(data: dict[str, Any], where: str) -> list[str]:
 
 # ----------------------------------------------------------------- the studies' schemas
 
-_COUNT = Key(int, required=True, min=1)
+# An upper bound on every count (poses, nodes, draws, repeats): 36 times the largest real
+# dataset seen (2773 poses) and ten times the paper's 10^4 Monte Carlo runs; a larger count
+# is a typo that would run for days or exhaust memory rather than an experiment
+MAX_COUNT = 100_000
+_COUNT = Key(int, required=True, min=1, max=MAX_COUNT)
 _NONNEG = Key(float, min=0)
 _POSITION_MM = Key(list, item=float, length=3)
 _HALF_WIDTH_MM = Key(list, required=True, item=float, length=2, above=0)
@@ -421,7 +427,7 @@ SCHEMAS: dict[str, Table] = {
             {
                 "position_mm": Key(list, required=True, item=float, length=3),
                 "noise": Key(str, required=True, check=_check_noise_spec),
-                "repeats": Key(int, min=1),
+                "repeats": Key(int, min=1, max=MAX_COUNT),
             },
             required=True,
         ),
@@ -447,7 +453,7 @@ SCHEMAS: dict[str, Table] = {
             {
                 "sigma_mm": Key(float, required=True, min=0),
                 "position_mm": Key(list, required=True, item=float, length=3),
-                "repeats": Key(int, min=1),
+                "repeats": Key(int, min=1, max=MAX_COUNT),
             },
             required=True,
         ),
@@ -468,13 +474,13 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
-        scoring=Table({"nodes_per_side": Key(int, min=1)}),
+        scoring=Table({"nodes_per_side": Key(int, min=1, max=MAX_COUNT)}),
         # the single scenario needs it; the draw study (with [draws]) does without
-        monte_carlo=Table({"runs": Key(int, required=True, min=2)}),
+        monte_carlo=Table({"runs": Key(int, required=True, min=2, max=MAX_COUNT)}),
         # the draw study: the whole scenario over n truth draws (seeds seed, seed + 1, ...)
         draws=Table(
             {
-                "n": Key(int, required=True, min=1),
+                "n": Key(int, required=True, min=1, max=MAX_COUNT),
                 "estimators": Key(list, min_items=1, check=_check_estimators),
                 "engine": Key(str, choices=("ray", "local")),
             }
@@ -521,7 +527,7 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
-        checks=Table({"fd_poses": Key(int, min=1)}),
+        checks=Table({"fd_poses": Key(int, min=1, max=MAX_COUNT)}),
         plan_comparison=Table(
             {
                 "plans": Key(
@@ -735,8 +741,8 @@ def _file_problems(scenario: Scenario, schema: Table) -> list[str]:
 
 def _toml(path: Path) -> dict[str, Any] | None:
     try:
-        return tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return tomllib.loads(read_utf8(path))
+    except (OSError, UnicodeError, tomllib.TOMLDecodeError):
         return None
 
 
@@ -776,10 +782,10 @@ def load_scenario(name_or_path: str) -> Scenario:
     """Read and validate a scenario against its study's schema; nothing runs before this."""
     path = find_scenario(name_or_path)
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(read_utf8(path))  # UTF-8; a byte-order mark is accepted
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path} is not valid TOML: {exc}") from exc
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, UnicodeError) as exc:
         raise ScenarioError(f"{path} cannot be read: {exc}") from exc
     study = data.get("study")
     if not isinstance(study, str):

@@ -125,8 +125,12 @@ def _variant(
         ["identify", *common, "--set", "calibration", "--out", str(result_json)],
         out_dir / f"{name}_identify.log",
     )
-    if not result_json.is_file():
-        raise ScenarioError(f"identify exited {code_id} without a result; see {name}_identify.log")
+    if not result_json.is_file():  # the log goes with the run's folder: its words, here
+        said = (out_dir / f"{name}_identify.log").read_text().strip().splitlines()
+        raise ScenarioError(
+            f"{name}: identify exited {code_id} without a result; it said:\n  "
+            + "\n  ".join(said[-12:])
+        )
     code_ver = _cli(
         [
             "verify",

@@ -440,6 +440,11 @@ CASES: dict[str, Case] = {
         ParameterError,
         ("bad.toml", "unknown top-level key 'paramter'", "did you mean 'parameter'"),
     ),
+    "error model of another machine": (
+        lambda env: model_file(env, 'model = "hexapod_rrrprr"', 'model = "polisher"'),
+        ParameterError,
+        ("bad.toml is an error model for 'polisher'", "the MJCF is 'hexapod_rrrprr'"),
+    ),
     "element not in the model": (
         lambda env: model_file(env, 'element = "leg1_base"', 'element = "leg9_base"'),
         ParameterError,

@@ -171,6 +171,12 @@ def load_parameter_set(path: str | Path, model: mujoco.MjModel) -> ParameterSet:
         )
     if "model" in doc and not isinstance(doc["model"], str):
         raise ParameterError(f"{path}: 'model' must be a string, got {doc['model']!r}")
+    machine = model.names[: model.names.find(b"\0")].decode()
+    if "model" in doc and machine and doc["model"] != machine:
+        raise ParameterError(
+            f"{path} is an error model for '{doc['model']}', but the MJCF is '{machine}' "
+            "(its <mujoco model=...>): another machine's errors"
+        )
     entries = doc.get("parameter")
     if entries is None or entries == []:
         raise ParameterError(f"{path} has no [[parameter]] entries")
