@@ -28,6 +28,9 @@ from calib.registration import (
 )
 from calib.registration import (
     Registration,
+    about,
+    about_jacobian,
+    centred,
     initial_registration,
     project_out,
     registration_jacobian,
@@ -205,8 +208,9 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     n_readings = measured.shape[0] * n_targets
     first = model.predict(x_start, commands)
     jac0 = model.jacobian(x_start, first)
-    reg0 = None
-    if obs.frame == "tracker":
+    reg0, centre = None, np.zeros(3)
+    if obs.frame == "tracker":  # the rotation turns about the readings' centre
+        measured, centre = centred(measured)
         reg0 = initial_registration(measured, first.targets)
         jreg0 = rigid_motion_span(first.targets)  # at the model's points: structure only
         report, redundant = _analyse(jac0, names, jreg0)
@@ -303,6 +307,11 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     std = np.full(n, np.nan)
     std[free] = np.sqrt(np.clip(np.diag(cov)[:k], 0, None))
     values, reg = split(res.x)
+    if reg is not None:  # from the centred readings back to the readings themselves
+        carry = np.eye(len(res.x))
+        carry[k:, k:] = about_jacobian(reg0, res.x[k:], centre)
+        cov = carry @ cov @ carry.T
+        reg = about(reg, centre)
     return IdentificationResult(
         names=names,
         values=values,
