@@ -7,6 +7,9 @@ before anything is replaced), then keeps a hard link (or copy) of each file it w
 then swaps the new files in one by one; if a swap fails, the files already swapped are put
 back from those links (and new ones removed), so the folder holds the previous set.
 
+:func:`staged` serves writers that write files themselves (figures, recordings): they write
+into a hidden staging folder, whose files then go in as one set.
+
 :class:`WriteSetError` (an OSError) names the file and the cause and says that the previous
 files were left as they were.
 """
@@ -14,10 +17,11 @@ files were left as they were.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from calib.atomic_files import ordinary_mode
@@ -137,3 +141,58 @@ def _discard(paths: list[Path]) -> None:
     for path in paths:
         with contextlib.suppress(OSError):
             path.unlink()
+
+
+STAGE_PREFIX = ".staged-"
+
+
+@contextlib.contextmanager
+def staged(folder: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield an empty hidden folder inside ``folder`` to write files into; when the block
+    ends, its files are written into ``folder`` as one set (:func:`write_set`). On any
+    exception nothing in ``folder`` changes (an OSError comes out as :class:`WriteSetError`).
+    The staging folder is held locked while in use; unlocked ones, left by killed
+    processes, are removed first."""
+    target = Path(folder)
+    target.mkdir(parents=True, exist_ok=True)
+    for stale in target.glob(f"{STAGE_PREFIX}*"):
+        _remove_if_unlocked(stale)
+    try:
+        stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=target))
+    except OSError as exc:
+        raise WriteSetError(exc.errno, _staged_message(target, exc), str(target)) from None
+    hold = os.open(stage, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(hold, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        try:
+            yield stage
+        except OSError as exc:
+            if isinstance(exc, WriteSetError):
+                raise
+            raise WriteSetError(exc.errno, _staged_message(target, exc), exc.filename) from None
+        write_set({target / p.name: _mover(p) for p in sorted(stage.iterdir()) if p.is_file()})
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        os.close(hold)
+
+
+def _staged_message(folder: Path, exc: OSError) -> str:
+    return f"cannot write into {folder}: {_cause(exc)}; none of its files was changed"
+
+
+def _mover(src: Path) -> Writer:
+    return lambda tmp: os.replace(src, tmp)
+
+
+def _remove_if_unlocked(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return  # in use by a live process
+    finally:
+        os.close(fd)
+    shutil.rmtree(path, ignore_errors=True)

@@ -167,3 +167,39 @@ def test_out_that_would_overwrite_an_input_is_refused_first(files, capsys, comma
     assert main(argv) == 2
     assert message in capsys.readouterr().err
     assert files["data"].read_bytes() == before
+
+
+def test_staged_files_go_in_as_a_set_or_not_at_all(tmp_path):
+    """What a sweep's aggregate (figures, recording, summary, report) is written through."""
+    from calib.write_set import STAGE_PREFIX, staged
+
+    (tmp_path / "summary.json").write_text("previous\n")
+    with (
+        pytest.raises(WriteSetError, match="none of its files was changed"),
+        staged(tmp_path) as stage,
+    ):
+        (stage / "summary.json").write_text("new\n")
+        (stage / "figure.png").write_bytes(b"png")
+        raise os_error(ENOSPC, stage / "report.md")  # the disk fills at the third file
+    assert _contents(tmp_path) == {"summary.json": b"previous\n"}
+    killed = tmp_path / f"{STAGE_PREFIX}left"  # a killed process's staging folder
+    killed.mkdir()
+    (killed / "x").write_text("x")
+    with staged(tmp_path) as stage:
+        (stage / "summary.json").write_text("new\n")
+        (stage / "report.md").write_text("report\n")
+    assert _contents(tmp_path) == {"summary.json": b"new\n", "report.md": b"report\n"}
+
+
+def test_sweep_on_a_full_disk_exits_2(tmp_path, monkeypatch, capsys):
+    from scenarios import sweep as sweep_module
+    from scenarios.__main__ import main as scenarios_main
+
+    def full(*args, **kwargs):
+        raise WriteSetError(ENOSPC, "cannot write into x: No space left on device; none", "x")
+
+    monkeypatch.setattr(sweep_module, "sweep", full)
+    argv = ["sweep", "undeclared_effect", "--seeds", "1", "--engine", "local", "--quiet"]
+    assert scenarios_main([*argv, "--results", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: cannot write into x: No space left on device")
