@@ -203,3 +203,22 @@ def test_sweep_on_a_full_disk_exits_2(tmp_path, monkeypatch, capsys):
     assert scenarios_main([*argv, "--results", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: cannot write into x: No space left on device")
+
+
+def test_dh_table_on_a_full_disk_writes_neither_file(tmp_path, monkeypatch, capsys):
+    """``python -m twin.dh_table --out-dir``: the MJCF and its error model, both or neither."""
+    from twin.dh_table import main as dh_main
+
+    real = write_set_module._temporary
+
+    def temporary(target: Path) -> Path:
+        if target.name.endswith(".params.toml"):
+            raise os_error(ENOSPC, target)
+        return real(target)
+
+    monkeypatch.setattr(write_set_module, "_temporary", temporary)
+    table = ROOT / "models/arm6r.mdh.csv"
+    assert dh_main([str(table), "--name", "arm", "--out-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "No space left on device; none of arm.xml, arm.params.toml was written" in err
+    assert list(tmp_path.iterdir()) == []
