@@ -132,6 +132,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         n_repeats=ds.n_repeats,
         tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
         test=test,
+        registration=run.result.registration is not None,
     )
     noise = diag.noise.as_dict() if diag.noise is not None else {}
     print(

@@ -28,6 +28,24 @@ from calib.model import CalibrationModel
 from twin.parameters import Parameter, ParameterSet
 
 STATIC = ("gain_error", "reflector_offsets", "joint_axis_errors")
+# why the others are no static kind of the error model (yet)
+NOT_STATIC = {
+    "thermal_growth": "it changes with time since the machine was switched on",
+    "zero_drift": "it changes with time",
+    "thermal_expansion": "it changes with time",
+    "tracker_drift": "it is the tracker's, in time, not the machine's",
+    "tracker_scale": "it is the tracker's scale, not the machine's",
+    "backlash": "it depends on the direction from which each actuator approached the pose",
+    "lead_error": "it is periodic in the command at the pitch the diagnosis scanned",
+    "encoder_eccentricity": "it is periodic in the joint angle at the harmonic scanned",
+    "gravity_compliance": "it depends on the gravity load at each pose (a compliance under a "
+    "payload the data cannot separate from it)",
+}
+
+
+def not_static_reason(name: str) -> str:
+    """Why ``name`` stays the diagnosis's own, in a clause."""
+    return NOT_STATIC.get(name, "it is no static kind of the error model")
 
 
 class EffectFileError(CalibError):
@@ -64,6 +82,7 @@ def effect_content(model: CalibrationModel, chosen: str) -> dict[str, Any]:
         "model": model.nominal.name,
         "static": static,
         "not_static": other,
+        "not_static_reasons": {n: not_static_reason(n) for n in other},
         "added_parameters": adds,
     }
 
@@ -134,9 +153,9 @@ def load_effect(path: str, model: CalibrationModel) -> dict[str, Any]:
     if not block.get("added_parameters"):
         other = block.get("not_static") or []
         why = (
-            f"it named {', '.join(other)}, which is no static kind of the error model (it "
-            "depends on time, the direction of approach or a scanned shape); its before and "
-            "after are the diagnosis's own"
+            f"it named {', '.join(other)}, which is no static kind of the error model ("
+            + "; ".join(f"{n}: {not_static_reason(n)}" for n in other)
+            + "); its before and after are the diagnosis's own"
             if other
             else f"it named no effect ({named}): there is nothing to add"
         )

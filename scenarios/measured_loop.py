@@ -136,6 +136,7 @@ def run(
             "test": diag.get("test"),
             "static": diag["effect"]["static"],
             "not_static": diag["effect"]["not_static"],
+            "not_static_reasons": diag["effect"]["not_static_reasons"],
         },
     }
     if diag["effect"]["added_parameters"]:

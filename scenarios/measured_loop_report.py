@@ -29,10 +29,10 @@ def _diagnosis_sentence(s: dict[str, Any]) -> str:
         )
     tail = ""
     if d["not_static"]:
+        why = "; ".join(f"{n}: {r}" for n, r in d["not_static_reasons"].items())
         tail = (
-            f" {', '.join(d['not_static'])} is no static kind of the error model (it depends "
-            "on time, the direction of approach or a scanned shape): it stays the diagnosis's "
-            "own, and `identify --with` cannot add it."
+            f" It is no static kind of the error model ({why}): its before and after above "
+            "are the diagnosis's own, and `identify --with` cannot add it."
         )
     return f"The diagnosis names **{named}**: {d['reason']}.{held}{tail}"
 
