@@ -51,7 +51,7 @@ from calib.diagnosis_candidates import (
     default_candidates,
     library,
 )
-from calib.diagnosis_context import build_context
+from calib.diagnosis_context import build_context, reflector_span
 from calib.diagnosis_fit import SCHEMES, Evaluation, Problem, fold_labels
 from calib.diagnosis_noise import NoiseLevel, check_against_residual, chi_square_p, noise_level
 from calib.diagnosis_plot import plot_data, plot_unexplained
@@ -262,7 +262,7 @@ def diagnose(
             reason=reason,
             geometry_correction=ev.fit.beta[:p],
             coefficients=_coefficients(chosen, ev),
-            effect_parameters=effect_parameters(prob, ctx, chosen, ev),
+            effect_parameters=effect_parameters(prob, ctx, chosen, ev, reflector_span(model)),
             notes=tuple(notes),
             test=test_block,
             plot=plot_data(ctx, r, keep, chosen, ev, prob),

@@ -45,6 +45,7 @@ class Case:
     errors: Path
     data: Path
     sigma_mm: float  # the accuracy the sidecar declares
+    truth: dict | None = None  # what a test may compare an answer with (never calib's input)
 
 
 def _uniform(rng: np.random.Generator, params, translation_mm: float, rotation_deg: float):
@@ -213,4 +214,4 @@ def hexapod_reflectors(
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "hexapod_reflectors.csv"
     data = _write(truth, commands, n_cal, tracker, effects, sigma_mm, path, rng)
-    return Case(model, errors, data, sigma_mm)
+    return Case(model, errors, data, sigma_mm, {"reflector_offsets_m": offsets})

@@ -19,6 +19,7 @@ import real_like_cases as cases
 from calib.__main__ import main
 from calib.dataset import read_dataset
 from calib.dataset_select import select_set
+from calib.diagnosis_context import reflector_span
 from calib.identify import bind_dataset, model_from_files
 from calib.regularisation import TIE
 from calib.verdict import EXIT_OK, EXIT_POOR_FIT
@@ -320,6 +321,19 @@ def test_hexapod_with_offset_reflectors_is_diagnosed_and_refitted(capsys, tmp_pa
     d = json.loads(diag.read_text())
     assert d["diagnosed_effect"] == "reflector_offsets"
     assert {a["kind"] for a in d["effect"]["added_parameters"]} == {"site_pos"}
+    # the offsets are what the data fix: the reflectors relative to each other, a common
+    # rigid motion of the three taken by the platform's own errors; the truth seen the same
+    # way agrees within three standard errors
+    fitted = d["effect_parameters"]["reflector_offsets"]
+    assert "up to a rigid motion of the reflector set" in fitted["note"]["value"]
+    model = model_from_files(str(case.model), str(case.errors))
+    span = reflector_span(model)["reflector_offsets"]
+    truth = case.truth["reflector_offsets_m"].reshape(-1)
+    truth = (truth - span @ np.linalg.pinv(span) @ truth) * 1e3
+    names = [a["name"] for a in d["effect"]["added_parameters"]]
+    for name, t in zip(names, truth, strict=True):
+        got = fitted[name]
+        assert abs(got["value"] - t) < 3 * got["std"] + 1e-9, (name, got, t)
     with_effect, v2 = tmp_path / "rw.json", tmp_path / "vw.json"
     code, text = _cli(
         capsys,
