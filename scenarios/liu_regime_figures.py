@@ -43,7 +43,8 @@ def heat_maps(out_dir: Path, summary: dict[str, Any]) -> dict[str, str]:
     places, sigmas = summary["placements"], summary["sigmas_mm"]
     written = {}
     for label, (gain, better) in grids.items():
-        fig, ax = plt.subplots(figsize=(1.6 + 1.35 * len(sigmas), 1.3 + 0.75 * len(places)))
+        # about the shape of a view in the recording's 2 x 2 grid, so it fills it
+        fig, ax = plt.subplots(figsize=(1.8 + 1.2 * len(sigmas), 1.9 + 0.9 * len(places)))
         im = ax.imshow(gain, cmap=CMAP, norm=norm, aspect="auto")
         for i in range(len(places)):
             for j in range(len(sigmas)):
@@ -54,7 +55,7 @@ def heat_maps(out_dir: Path, summary: dict[str, Any]) -> dict[str, str]:
                     f"{gain[i, j]:+.2g} um\n{better[i, j]:.0%} better",
                     ha="center",
                     va="center",
-                    fontsize=8,
+                    fontsize=9,
                     color="white" if dark else "black",
                 )
         ax.set_xticks(range(len(sigmas)), [f"{s:g}" for s in sigmas])

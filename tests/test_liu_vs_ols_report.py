@@ -113,10 +113,10 @@ def test_the_loop_sentence_follows_the_loop():
 def test_the_verdict_on_the_papers_gain_follows_the_numbers():
     s = summary()
     text = report(s)
-    assert "**No**" in text and "+0.6 %" in text  # 0.0359 -> 0.0361 mm
+    assert "**No**" in text and "+0.56 %" in text  # 0.0359 -> 0.0361 mm
     s["layers"]["test"]["liu_paper_deg"] = _row(0.0300, 0.060)  # the paper's gain
     text = report(s)
-    assert "**Yes**" in text and "-16.4 %" in text
+    assert "**Yes**" in text and "-16.43 %" in text
 
 
 def test_the_noise_ceiling_and_eta_are_the_runs():
@@ -125,10 +125,13 @@ def test_the_noise_ceiling_and_eta_are_the_runs():
     assert "1.92 um mean and 4.65 um max" in text and "less than the paper's gain" in text
     assert "| liu (HKB k) | 37.3 | 6.4 |" in text
     assert "eta is about the parameters, not the pose error" in text
+    assert "its shrinkage takes 0.33 um of noise off the mean" in text
     s["noise_only_test_um"]["ols"] = {"mean": 7.5, "max": 20.0}
+    s["noise_only_test_um"]["liu_paper_deg"] = {"mean": 9.5, "max": 25.0}
     s["eta_at_used_d_percent"]["liu"] = 21.0
     text = report(s)
     assert "7.5 um mean and 20 um max" in text and "as much as the paper's gain" in text
+    assert "2 um more than OLS's" in text
     assert "| liu (HKB k) | 37.3 | 21.0 |" in text
 
 
@@ -162,7 +165,8 @@ def test_the_regime_pointer_reads_the_map():
     s["regime"] = {"source": "liu_regime/summary.json", "cells": {"interpolated/0.005": cell}}
     text = report(s)
     assert "+0.07 um (median), better in 15% of draws" in text
-    assert "0.4 um, by `liu` in the cell interpolated/0.005" in text
+    assert "The HKB Liu (`liu`) gains most in interpolated/0.005, 0.4 um" in text
+    assert "The paper's Liu (`liu_paper_deg`) gains over OLS in no cell" in text
 
 
 @pytest.fixture
