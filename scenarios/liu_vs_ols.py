@@ -54,6 +54,7 @@ from twin.parameters import KINDS, ParameterSet
 POSITION_FACTOR = 1.5
 MATCHED_ROWS = ("coarse", "ols")
 REGIME_STUDY = "liu_regime"  # the regime map, beside this scenario's results when run
+REGIME_GEOMETRY = "liu_regime_geometry"  # the same map on a geometry-only truth
 
 
 def paper_match(layers: dict[str, dict[str, dict[str, float]]]) -> dict[str, Any]:
@@ -114,17 +115,18 @@ def draws_reference(out_dir: Path) -> dict[str, Any]:
     return {**d, "source": f"{DRAW_STUDY}/summary.json"}
 
 
-def regime_reference(out_dir: Path) -> dict[str, Any]:
+def regime_reference(out_dir: Path, name: str = REGIME_STUDY) -> dict[str, Any]:
     """The regime map's cells when it has been run into the same results root."""
-    path = out_dir.parent / REGIME_STUDY / "summary.json"
+    path = out_dir.parent / name / "summary.json"
     if not path.is_file():
-        return {"note": f"not run yet: make scenario NAME={REGIME_STUDY}"}
+        return {"note": f"not run yet: make scenario NAME={name}"}
     r = json.loads(path.read_text())
     return {
-        "source": f"{REGIME_STUDY}/summary.json",
+        "source": f"{name}/summary.json",
         "cells": r.get("cells", {}),
         "sigmas_mm": r.get("sigmas_mm"),
         "placements": r.get("placements"),
+        "truth_effects": r.get("truth_effects", []),
     }
 
 
@@ -270,6 +272,7 @@ def run(
         "loop": loop.summary(),
         "draws": draws_reference(out_dir),
         "regime": regime_reference(out_dir),
+        "regime_geometry": regime_reference(out_dir, REGIME_GEOMETRY),
         "estimators": {
             m: {
                 "bias_parameter": e.bias_parameter,

@@ -162,9 +162,28 @@ def test_the_regime_pointer_reads_the_map():
             "liu": {"minus_ols_um": {"median": -0.4}, "better_fraction": 1.0},
         },
     }
-    s["regime"] = {"source": "liu_regime/summary.json", "cells": {"interpolated/0.005": cell}}
+    s["regime"] = {
+        "source": "liu_regime/summary.json",
+        "cells": {"interpolated/0.005": cell},
+        "sigmas_mm": [0.005],
+        "truth_effects": ["joint_backlash"],
+    }
     text = report(s)
+    assert "With the lost motion of the joints (backlash), the paper's Liu minus OLS" in text
     assert "+0.07 um (median), better in 15% of draws" in text
+    assert "test layer by tracker noise (median, and the share of draws it is better): " in text
+    assert "0.005 mm: +0.07 um (15%)." in text
+    assert "geometry-only" not in text
+    geo = copy.deepcopy(cell)
+    geo["estimators"]["liu_paper_deg"] = {"minus_ols_um": {"median": -1.5}, "better_fraction": 0.98}
+    s["regime_geometry"] = {
+        "source": "liu_regime_geometry/summary.json",
+        "cells": {"interpolated/0.02": geo},
+        "sigmas_mm": [0.02],
+    }
+    text = report(s)
+    assert "On a geometry-only truth (liu_regime_geometry/summary.json)" in text
+    assert "0.02 mm: -1.5 um (98%)." in text
     assert "The HKB Liu (`liu`) gains most in interpolated/0.005, 0.4 um" in text
     assert "The paper's Liu (`liu_paper_deg`) gains over OLS in no cell" in text
 
