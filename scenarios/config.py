@@ -431,34 +431,23 @@ _ARM_PLAN = Table(
     required=True,
 )
 
-SCHEMAS: dict[str, Table] = {
-    "hexapod_paper": _base(
-        seed=_SEED,
-        truth=_truth(),
-        tracker=Table(
-            {
-                "position_mm": Key(list, required=True, item=float, length=3),
-                "noise": Key(str, required=True, check=_check_noise_spec),
-                "repeats": Key(int, min=1),
-            },
-            required=True,
-        ),
-        pose_noise=_POSE_NOISE,
-        plans=Table(
-            {"noise_free_poses": _COUNT, "few_poses": _COUNT, "many_poses": _COUNT},
-            required=True,
-        ),
-        verification=Table(
-            {
-                "nodes_per_axis": _COUNT,
-                "orientations_per_node": _COUNT,
-                "margin": Key(float, min=0, below=0.5),
-                "stroke_margin_mm": _NONNEG,
-            },
-            required=True,
-        ),
-    ),
-    "liu_vs_ols": _base(
+PLACEMENTS = ("interpolated", "extrapolated", "tilted")
+
+
+def _check_placements(value: list, where: str) -> list[str]:
+    out = [
+        f"'{where}[{i}]': " + unknown_name_message("placement", p, list(PLACEMENTS))
+        for i, p in enumerate(value)
+        if p not in PLACEMENTS
+    ]
+    if len(set(value)) != len(value):
+        out.append(f"'{where}' names a placement twice")
+    return out
+
+
+def _liu_vs_ols_keys() -> dict[str, Key | Table]:
+    """The keys of liu_vs_ols's plan and twin (its single run, draw study and regime map)."""
+    return dict(
         seed=_SEED,
         truth=_truth(effects=Key(list, check=_check_effects)),
         tracker=Table(
@@ -487,6 +476,38 @@ SCHEMAS: dict[str, Table] = {
             required=True,
         ),
         scoring=Table({"nodes_per_side": Key(int, min=1)}),
+    )
+
+
+SCHEMAS: dict[str, Table] = {
+    "hexapod_paper": _base(
+        seed=_SEED,
+        truth=_truth(),
+        tracker=Table(
+            {
+                "position_mm": Key(list, required=True, item=float, length=3),
+                "noise": Key(str, required=True, check=_check_noise_spec),
+                "repeats": Key(int, min=1),
+            },
+            required=True,
+        ),
+        pose_noise=_POSE_NOISE,
+        plans=Table(
+            {"noise_free_poses": _COUNT, "few_poses": _COUNT, "many_poses": _COUNT},
+            required=True,
+        ),
+        verification=Table(
+            {
+                "nodes_per_axis": _COUNT,
+                "orientations_per_node": _COUNT,
+                "margin": Key(float, min=0, below=0.5),
+                "stroke_margin_mm": _NONNEG,
+            },
+            required=True,
+        ),
+    ),
+    "liu_vs_ols": _base(
+        **_liu_vs_ols_keys(),
         # the single scenario needs it; the draw study (with [draws]) does without
         monte_carlo=Table({"runs": Key(int, required=True, min=2)}),
         # the draw study: the whole scenario over n truth draws (seeds seed, seed + 1, ...)
@@ -499,6 +520,26 @@ SCHEMAS: dict[str, Table] = {
         ),
         # the loop after the fine calibration (diagnosis, effect, refit, compensation)
         loop=Table({"estimator": Key(str)}),
+    ),
+    # liu_vs_ols's plan and twin over a grid of tracker noise and test placements
+    "liu_regime": _base(
+        **_liu_vs_ols_keys(),
+        regime=Table(
+            {
+                "sigmas_mm": Key(list, required=True, item=float, min_items=1, above=0),
+                "placements": Key(
+                    list, required=True, item=str, min_items=1, check=_check_placements
+                ),
+                "draws": Key(int, required=True, min=1),
+                "extrapolated_offset_mm": Key(float, above=0),
+                "extrapolated_side": Key(str, choices=("below", "above")),
+                "stroke_margin_mm": _NONNEG,
+                "tilt_deg": Key(list, item=float, length=2, min=0, below=90),
+                "tilt_seed": Key(int, min=0),
+                "engine": Key(str, choices=("ray", "local")),
+            },
+            required=True,
+        ),
     ),
     "optimal_poses": _base(
         seed=_SEED,

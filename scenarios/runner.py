@@ -36,6 +36,7 @@ STUDIES = {
         "scenarios.polisher_identifiability_report",
     ),
     "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
+    "liu_regime": ("scenarios.liu_regime", "scenarios.liu_regime_report"),
     "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
     "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
     "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
