@@ -6,6 +6,10 @@
                              [--set test] [--out V.json]
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--sigma-mm S]
                              [--test T.csv] [--out D.json]
+    python -m calib compensate --model M.xml --errors E.toml --result R.json
+                             --poses desired.csv --out commands.csv [--frame base|tracker]
+    python -m calib export   --model M.xml --errors E.toml --result R.json
+                             --out M_calibrated.xml [--dh-out T.csv]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
@@ -13,11 +17,14 @@ frame or, for a sidecar with "frame": "tracker", with the tracker's registration
 alongside. ``verify`` scores any set before (nominal) and after (identified): the 3D position
 error per reading (RMS, mean, max), a per-reading CSV and a PNG. ``diagnose`` asks whether the
 residual is more than the tracker noise and which physical effect explains it.
+``compensate`` turns desired tool poses into the commands that put the identified machine
+there; ``export`` writes the calibrated model (MJCF, and DH table for a DH-generated arm).
+``verify --model M_calibrated.xml`` without ``--result`` scores a model as it is.
 
 Exit codes (calib.verdict): 0 success; 2 bad input (the message names the cause); 3 the fit
 did not converge; 4 the data does not fit the model (residual far above the declared tracker
-accuracy, implausible estimates, or too many outliers; the likely cause is said); 130
-interrupted.
+accuracy, implausible estimates, or too many outliers; the likely cause is said);
+5 some desired poses out of reach (compensate); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib import cmd_compensate, cmd_export
 from calib.atomic_files import write_json_atomic, write_text_atomic
 from calib.dataset import DatasetError, read_dataset
 from calib.exceptions import CalibError
@@ -190,6 +198,12 @@ def _csv_text(rows: list[dict]) -> str:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
+    if args.result is None:  # the model as it is, e.g. one written by export
+        from calib import verify_as_is
+
+        return verify_as_is.run(args)
+    if args.errors is None:
+        raise CalibError("verify --result needs --errors (the error model of the result)")
     model = model_from_files(args.model, args.errors)
     loaded = load_result(args.result, expected_model=model.nominal.name)
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
@@ -344,9 +358,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _model_options(p: argparse.ArgumentParser) -> None:
+def _model_options(p: argparse.ArgumentParser, errors_required: bool = True) -> None:
     p.add_argument("--model", required=True, help="nominal MJCF of the machine")
-    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
+    p.add_argument(
+        "--errors", required=errors_required, help="error model (TOML [[parameter]] list)"
+    )
     p.add_argument("--data", required=True, help="Dataset CSV (with its .json sidecar)")
     p.add_argument("--out", help="write the result as JSON here (atomically)")
 
@@ -405,8 +421,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="(the default now) keep unidentifiable parameters at zero",
     )
     ver = sub.add_parser("verify", help="score a dataset before and after a calibration")
-    _model_options(ver)
-    ver.add_argument("--result", required=True, help="result JSON written by identify --out")
+    _model_options(ver, errors_required=False)
+    ver.add_argument(
+        "--result",
+        help="result JSON written by identify --out; without it the model is scored as it is "
+        "(e.g. one written by export), a tracker frame registered on the calibration rows",
+    )
     ver.add_argument("--set", help="score the rows of this set (default: all rows)")
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
@@ -424,10 +444,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="a Dataset CSV of poses not used to fit: an effect is named only if it lowers "
         "their error too; the JSON gets test.before and test.after",
     )
+    for command in (cmd_compensate, cmd_export):  # each subcommand in its own module
+        command.add_parser(sub)
     return parser
 
 
-COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
+COMMANDS = {
+    "identify": cmd_identify,
+    "verify": cmd_verify,
+    "diagnose": cmd_diagnose,
+    "compensate": cmd_compensate.run,
+    "export": cmd_export.run,
+}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,6 +15,7 @@ exit code:
        beyond a plausible size (50 mm, 20 deg by default: the fit bent the geometry to fit
        bad data), or too many readings rejected as outliers (the likely cause is said when
        the data shows it)
+    5  compensate: some desired poses are out of reach (each is named; the others written)
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_POOR_FIT = 4
+EXIT_UNREACHABLE = 5
 DEFAULT_MAX_RATIO = 10.0
 # an estimate beyond these is not a manufacturing or assembly error but a fit that went
 # astray (a length error of 5 cm on a machine built to tenths of a millimetre)
