@@ -556,6 +556,14 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
+        compensation=Table(
+            {
+                "desired_poses": _COUNT,
+                "joint_fraction": Key(float, required=True, above=0, max=1),
+                "stroke_margin_deg": Key(float, required=True, min=0),
+            },
+            required=True,
+        ),
         variants=Table(
             {
                 "three_reflectors": Table(
