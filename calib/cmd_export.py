@@ -18,7 +18,7 @@ import argparse
 
 from calib.identified_machine import load_identified_machine
 from calib.identify import model_from_files
-from calib.model_export import FK_TOLERANCE_M, export_model
+from calib.model_export import FK_TOLERANCE_M, export_model, gains_text
 from calib.verdict import EXIT_OK
 
 
@@ -58,6 +58,9 @@ def run(args: argparse.Namespace) -> int:
             "the tracker registration is not part of the model: readings in the tracker's "
             "frame are registered again when the model is verified"
         )
+    gains = gains_text(machine)
+    if gains:
+        print(f"the {gains}; the check above is in joint values")
     if done.dh_out is not None:
         print(f"wrote {done.dh_out}: the calibrated DH table")
     return EXIT_OK

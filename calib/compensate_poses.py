@@ -8,8 +8,9 @@ A pose that fails is named with the reason, in the units of files: which actuato
 how much it would leave its stroke, the axis that leaves the workspace, or an inverse
 kinematics that does not converge. ``compensate`` runs it on the identified machine for the
 poses a user asks for (started from the nominal solution of each, so that both stay on the
-same branch), with the residual the identified model predicts at the commands and the error
-it predicts for the nominal commands.
+same branch), turns the joint values into commands through the identified actuator gains
+(if any; their strokes checked again), and gives the residual the identified model predicts
+at the commands and the error it predicts for the nominal commands.
 """
 
 from __future__ import annotations
@@ -115,20 +116,21 @@ def solve_each(mech: Mechanism, poses: np.ndarray, starts: np.ndarray | None = N
     return SolvedPoses(commands, qpos, tuple(problems))
 
 
-def _tool_at(mech: Mechanism, commands: np.ndarray, start: np.ndarray):
-    """Tool rotations (N, 3, 3) and positions (N, 3) at ``commands`` (rows of NaN stay NaN)."""
-    rot = np.full((len(commands), 3, 3), np.nan)
-    pos = np.full((len(commands), 3), np.nan)
-    ok = np.all(np.isfinite(commands), axis=1)
+def _tool_at(mech: Mechanism, joints: np.ndarray, start: np.ndarray):
+    """Tool rotations (N, 3, 3) and positions (N, 3) at the actuated joints' values ``joints``
+    (rows of NaN stay NaN; a gain may take a joint a few ppm past its stroke)."""
+    rot = np.full((len(joints), 3, 3), np.nan)
+    pos = np.full((len(joints), 3), np.nan)
+    ok = np.all(np.isfinite(joints), axis=1)
     if not np.any(ok):
         return rot, pos
     try:
-        sol = forward_batch(mech, commands[ok], start=start[ok])
+        sol = forward_batch(mech, joints[ok], start=start[ok], check_stroke=False)
         rot[ok], pos[ok] = sol.tool_rotation, sol.tool_position
     except (ClosureError, WorkspaceError):  # one by one, leaving out those that fail
         for i in np.flatnonzero(ok):
             try:
-                one = forward(mech, commands[i], start=start[i])
+                one = forward(mech, joints[i], start=start[i], check_stroke=False)
             except (ClosureError, WorkspaceError):
                 continue
             rot[i], pos[i] = one.tool_rotation, one.tool_position
@@ -160,17 +162,27 @@ def compensate(
     SI), each started from the nominal model's solution of the same pose."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     nominal = solve_each(machine.nominal, poses)
-    solved = solve_each(machine.mechanism, poses, starts=nominal.qpos)
+    solved = solve_each(machine.mechanism, poses, starts=nominal.qpos)  # joint values
+    commands = machine.commands_for_joints(solved.commands)
+    problems = list(solved.problems)
+    for i in np.flatnonzero(solved.reachable):  # a gain may take a command past its stroke
+        excess = stroke_excess(machine.nominal, commands[i])
+        if excess:
+            problems[i] = f"{excess} (the command, through the identified actuator gain)"
+            commands[i] = np.nan
+    reachable = np.array([p is None for p in problems], dtype=bool)
     goal_rot, goal_pos = pose_to_frame(poses)
-    rot, pos = _tool_at(machine.mechanism, solved.commands, solved.qpos)
+    # what the identified machine does with the written commands (the gains' round trip)
+    rot, pos = _tool_at(machine.mechanism, machine.joints_for_commands(commands), solved.qpos)
     turn = rotation_angle(np.swapaxes(goal_rot, -1, -2) @ np.nan_to_num(rot))
-    residual_rad = np.where(solved.reachable, turn, np.nan)
-    _, nominal_pos = _tool_at(machine.mechanism, nominal.commands, nominal.qpos)
+    residual_rad = np.where(reachable, turn, np.nan)
+    nominal_joints = machine.joints_for_commands(nominal.commands)
+    _, nominal_pos = _tool_at(machine.mechanism, nominal_joints, nominal.qpos)
     return Compensation(
         pose_ids=tuple(pose_ids),
         poses=poses,
-        commands=solved.commands,
-        problems=solved.problems,
+        commands=commands,
+        problems=tuple(problems),
         residual_m=np.linalg.norm(pos - goal_pos, axis=1),
         residual_rad=residual_rad,
         nominal_commands=nominal.commands,

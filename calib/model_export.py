@@ -5,6 +5,11 @@ compiled again and its forward kinematics compared with the identified model's a
 spread over what the machine reaches: the file is written only if they agree to
 ``FK_TOLERANCE_M``. For a model generated from a DH table, the calibrated table as well
 (twin.dh_extract). Nothing is written when any part fails.
+
+Actuator gains (``identify --with`` a diagnosis that named them) are no geometry: an MJCF
+joint's value is its command. The file then holds the identified geometry, its kinematics
+is checked in joint values, and the gains are named in its header and the command's
+output for the controller to apply (joint = zero + (command - zero)(1 + gain)).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from twin.kinematics import forward
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.mjcf_values import WrittenMjcf, mjcf_with_values, with_header
+from twin.parameters import ParameterSet
 from twin.rotations import rotation_angle
 from twin.workspace import random_poses
 
@@ -94,15 +100,42 @@ def kinematics_difference(a: Mechanism, b: Mechanism, commands: np.ndarray) -> K
     )
 
 
+def geometry(machine: IdentifiedMachine) -> tuple[ParameterSet, np.ndarray]:
+    """The identified machine's geometric parameters and their values (the gains left out)."""
+    params, values = machine.model.params, machine.values
+    if not params.has_gains:
+        return params, values
+    keep = ~params.is_gain
+    chosen = [p for p, k in zip(params.parameters, keep, strict=True) if k]
+    return ParameterSet(chosen, machine.nominal.model), values[keep]
+
+
+def gains_text(machine: IdentifiedMachine) -> str | None:
+    """The identified actuator gains in words (ppm), or None without any."""
+    params = machine.model.params
+    if not params.has_gains:
+        return None
+    shown = params.to_display(machine.values)
+    parts = [
+        f"{params.parameters[k].element} {shown[k]:+.4g} ppm"
+        for k in np.flatnonzero(params.is_gain)
+    ]
+    return (
+        "actuator gains, no geometry and so not in the MJCF (the controller applies them: "
+        "joint = zero + (command - zero)(1 + gain)): " + ", ".join(parts)
+    )
+
+
 def calibrated_mjcf(
     machine: IdentifiedMachine, model_path: str | Path, out_dir: str | Path | None = None
 ) -> WrittenMjcf:
-    """The nominal MJCF text with the identified values written in (no header)."""
+    """The nominal MJCF text with the identified geometry written in (no header)."""
+    params, values = geometry(machine)
     return mjcf_with_values(
         model_path,
         machine.nominal.model,
-        machine.model.params,
-        machine.values,
+        params,
+        values,
         out_dir=out_dir,
         bound_masses=machine.nominal.masses_defaulted,
     )
@@ -134,6 +167,7 @@ def _header(machine: IdentifiedMachine, model_path: Path, w: WrittenMjcf, c: Kin
             if machine.registration is not None
             else ""
         )
+        + (f" The {gains_text(machine)}." if machine.model.params.has_gains else "")
     )
 
 

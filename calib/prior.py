@@ -75,6 +75,15 @@ class Prior:
         return self.noise_sigma_m / self.std  # 0 where std is inf
 
 
+def physical_ranges(is_angle: np.ndarray, spec: PriorSpec | None = None) -> np.ndarray:
+    """Each parameter's physical range in SI: the size an error of its kind can have on a
+    built machine (``spec``'s, else ``DEFAULT_RANGE``): the unit in which the estimates'
+    sizes are compared (calib.redundancy) and the default prior's width."""
+    length = DEFAULT_RANGE["length"] if spec is None or spec.length_mm is None else spec.length_mm
+    angle = DEFAULT_RANGE["angle"] if spec is None or spec.angle_deg is None else spec.angle_deg
+    return np.where(np.asarray(is_angle, dtype=bool), math.radians(angle), length * 1e-3)
+
+
 def padded_rows(weights: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Prior residual rows ``w * x`` and their Jacobian ``diag(w)`` over the priored
     parameters, padded with zero rows to a multiple of 3 (readings are groups of 3 rows)."""

@@ -413,6 +413,24 @@ _POSE_NOISE = Table(
     required=True,
 )
 
+_ARM_TRACKER = Table(
+    {
+        "position_mm": Key(list, required=True, item=float, length=3),
+        "rotation_deg": Key(list, required=True, item=float, length=3),
+        "noise": Key(str, required=True, check=_check_noise_spec),
+        "sigma_mm": Key(float, required=True, above=0),
+    },
+    required=True,
+)
+_ARM_PLAN = Table(
+    {
+        "calibration_poses": _COUNT,
+        "test_poses": _COUNT,
+        "joint_fraction": Key(float, required=True, above=0, max=1),
+    },
+    required=True,
+)
+
 SCHEMAS: dict[str, Table] = {
     "hexapod_paper": _base(
         seed=_SEED,
@@ -539,23 +557,8 @@ SCHEMAS: dict[str, Table] = {
     "serial_arm": _base(
         seed=_SEED,
         truth=Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
-        tracker=Table(
-            {
-                "position_mm": Key(list, required=True, item=float, length=3),
-                "rotation_deg": Key(list, required=True, item=float, length=3),
-                "noise": Key(str, required=True, check=_check_noise_spec),
-                "sigma_mm": Key(float, required=True, above=0),
-            },
-            required=True,
-        ),
-        plan=Table(
-            {
-                "calibration_poses": _COUNT,
-                "test_poses": _COUNT,
-                "joint_fraction": Key(float, required=True, above=0, max=1),
-            },
-            required=True,
-        ),
+        tracker=_ARM_TRACKER,
+        plan=_ARM_PLAN,
         compensation=Table(
             {
                 "desired_poses": _COUNT,
@@ -576,6 +579,18 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
+    ),
+    "measured_loop": _base(
+        seed=_SEED,
+        truth=Table(
+            {
+                "random": Table(_TRUTH_RANDOM.keys, required=True),
+                "effects": Key(list, check=_check_effects),
+            },
+            required=True,
+        ),
+        tracker=_ARM_TRACKER,
+        plan=_ARM_PLAN,
     ),
     "undeclared_effect": _base(
         seed=_SEED,

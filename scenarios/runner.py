@@ -39,6 +39,7 @@ STUDIES = {
     "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
     "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
     "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
+    "measured_loop": ("scenarios.measured_loop", "scenarios.measured_loop_report"),
     "diagnosis_benchmark": (
         "scenarios.diagnosis_benchmark",
         "scenarios.diagnosis_benchmark_report",

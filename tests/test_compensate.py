@@ -194,3 +194,42 @@ def test_another_machines_result_is_refused(tmp_path, capsys):
     code, out = _compensate(tmp_path, ARM, ARM_ERRORS, result, poses)
     assert code == 2 and "another machine" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_identified_actuator_gains_turn_joint_values_into_commands(tmp_path, capsys):
+    """A result of identify --with (gains added to the error model): the commands differ from
+    the joint values by the gains, and the joints they give put the tool at the poses."""
+    from calib.identified_machine import load_identified_machine
+    from calib.identify import model_from_files
+    from twin.parameters import Parameter, ParameterSet
+
+    nominal = Mechanism.from_xml(HEXAPOD)
+    base = load_parameter_set(HEXAPOD_ERRORS, nominal.model)
+    gains = [Parameter(f"{a}.gain", "actuator_gain", a) for a in nominal.actuator_names]
+    params = ParameterSet([*base.parameters, *gains], nominal.model)
+    geometry = load_values(ROOT / "scenarios/truth/hexapod_table2.toml", base)
+    ppm = np.array([300.0, -200.0, 150.0, 0.0, 500.0, -400.0]) * 1e-6
+    values = np.concatenate([geometry, ppm])
+    result = result_file(tmp_path / "r.json", nominal.name, params, values, added=gains)
+    poses, _ = random_poses(nominal, 5, np.random.default_rng(24))
+    csv_path = _poses_csv(tmp_path / "p.csv", list("abcde"), poses[:, :3], poses[:, 3:])
+    code, out = _compensate(tmp_path, HEXAPOD, HEXAPOD_ERRORS, result, csv_path)
+    assert code == 0, capsys.readouterr().err
+    _, cmds = _read(out, nominal)
+    machine = load_identified_machine(model_from_files(str(HEXAPOD), str(HEXAPOD_ERRORS)), result)
+    assert machine.model.params.names == params.names
+    joints = machine.joints_for_commands(cmds)
+    zero = machine.model.joint_zeros(machine.values)
+    assert np.allclose(joints - zero, (cmds - zero) * (1 + ppm), rtol=0, atol=1e-15)
+    assert np.array_equal(joints[:, 3], cmds[:, 3])  # leg4 has none
+    reached = forward_batch(machine.mechanism, joints, check_stroke=False)
+    rot, pos = pose_to_frame(poses)
+    assert np.max(np.abs(reached.tool_position - pos)) < 1e-9
+    assert np.max(rotation_angle(np.swapaxes(reached.tool_rotation, 1, 2) @ rot)) < 1e-9
+    # export writes the geometry and names the gains for the controller
+    exported = tmp_path / "h.xml"
+    args = ["export", "--model", str(HEXAPOD), "--errors", str(HEXAPOD_ERRORS)]
+    assert main([*args, "--result", str(result), "--out", str(exported)]) == 0
+    said = capsys.readouterr().out
+    assert "leg1 +300 ppm" in said and "not in the MJCF" in said
+    assert "leg6 -400 ppm" in exported.read_text()

@@ -8,7 +8,7 @@ import numpy as np
 
 from calib.registration import Registration
 from calib.result_file import write_result
-from twin.parameters import ParameterSet
+from twin.parameters import Parameter, ParameterSet
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -29,16 +29,24 @@ def result_file(
     params: ParameterSet,
     values: np.ndarray,
     registration: Registration | None = None,
+    added: list[Parameter] | None = None,
 ) -> Path:
-    """A result file as ``calib identify --out`` writes it, holding ``values`` (SI)."""
+    """A result file as ``calib identify --out`` writes it, holding ``values`` (SI) of
+    ``params``; ``added``: those of them that ``identify --with`` added to the error model."""
     shown = params.to_display(values)
+    units = params.display_units()
     content = {
         "model": model,
         "frame": "base" if registration is None else "tracker",
         "parameters": {
-            n: {"value": float(v), "unit": "deg" if a else "mm", "status": "estimated"}
-            for n, v, a in zip(params.names, shown, params.is_angle, strict=True)
+            n: {"value": float(v), "unit": u, "status": "estimated"}
+            for n, v, u in zip(params.names, shown, units, strict=True)
         },
         "registration": None if registration is None else registration.as_dict(),
     }
+    if added:
+        content["added_parameters"] = [
+            {"name": p.name, "kind": p.kind, "element": p.element, "axis": list(p.axis)}
+            for p in added
+        ]
     return write_result(path, content)
