@@ -103,10 +103,9 @@ def _print_run(run: CalibrationRun) -> None:
         )
     shown, std = params.to_display(res.values), params.to_display(res.std_errors)
     weak = {w["name"] for w in run.weak}
-    for name, v, s, ang, est in zip(
-        res.names, shown, std, params.is_angle, res.estimated, strict=True
+    for name, v, s, unit, est in zip(
+        res.names, shown, std, params.display_units(), res.estimated, strict=True
     ):
-        unit = "deg" if ang else "mm"
         if est:
             tail = f"+- {s:.4f}" + ("  weakly identified" if name in weak else "")
         else:

@@ -190,7 +190,7 @@ def identify(
             plain.fit_jacobian,
             plain.fit_residual,
             plain.values[free] - (0.0 if x0 is None else np.asarray(x0, dtype=float)[free]),
-            physical_ranges(model.params.is_angle)[free],
+            physical_ranges(model.params)[free],
             plain.fit_pose_of_row,
         )
         if choice.basis is None:
@@ -318,7 +318,7 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     first = model.predict(x_start, commands)
     jac0 = model.jacobian(x_start, first)
     reg0 = jreg0 = None
-    ranges = physical_ranges(model.params.is_angle)
+    ranges = physical_ranges(model.params)
     if obs.frame == "tracker":
         reg0 = initial_registration(measured, first.targets)
         jreg0 = rigid_motion_span(first.targets)  # at the model's points: structure only

@@ -27,6 +27,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
@@ -37,6 +39,7 @@ DEFAULT_MAX_RATIO: float | None = None  # no gate on the residual's size unless 
 # astray (a length error of 5 cm on a machine built to tenths of a millimetre)
 PLAUSIBLE_MM = 50.0
 PLAUSIBLE_DEG = 20.0
+PLAUSIBLE_PPM = 2e5  # an actuator gain 20 % off is a wrong factor, not a calibration error
 PLAUSIBLE_RESIDUAL_FRACTION = 0.01  # of the machine's reach, 3D RMS after calibration
 ASSUMED_SIGMA_MM = 0.05  # per coordinate: a laser tracker at a few metres plus repeatability
 
@@ -174,17 +177,19 @@ def judge_fit(
 def implausible_estimates(
     names: tuple[str, ...],
     display_values: Any,
-    is_angle: Any,
+    units: Any,
     display_std: Any = None,
-    plausible_mm: float = PLAUSIBLE_MM,
-    plausible_deg: float = PLAUSIBLE_DEG,
 ) -> tuple[str, ...]:
-    """Parameters whose estimate (mm or deg) exceeds the plausible size of its kind by more
-    than three of its standard errors (``display_std``, same units; None: by any amount)."""
+    """Parameters whose estimate (in its display unit: "mm", "deg", "ppm"; a bool is read
+    as angle or not) exceeds the plausible size of its kind by more than three of its
+    standard errors (``display_std``, same units; None: by any amount)."""
+    limits = {"mm": PLAUSIBLE_MM, "deg": PLAUSIBLE_DEG, "ppm": PLAUSIBLE_PPM}
     out = []
     std = [0.0] * len(names) if display_std is None else list(display_std)
-    for name, v, s, angle in zip(names, display_values, std, is_angle, strict=True):
-        limit, unit = (plausible_deg, "deg") if angle else (plausible_mm, "mm")
+    for name, v, s, unit in zip(names, display_values, std, units, strict=True):
+        if isinstance(unit, (bool, np.bool_)):
+            unit = "deg" if unit else "mm"
+        limit = limits[unit]
         s = float(s) if math.isfinite(float(s)) else 0.0
         if not math.isfinite(float(v)) or abs(float(v)) - 3.0 * s > limit:
             out.append(f"{name} = {float(v):+.1f} +- {s:.1f} {unit}")

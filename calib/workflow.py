@@ -92,7 +92,7 @@ def calibrate(
     obs = bind_dataset(model.nominal, picked)
     accuracy = declared_accuracy(sigma_mm, picked.tracker)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
-    ranges = physical_ranges(model.params.is_angle, prior_spec)
+    ranges = physical_ranges(model.params, prior_spec)
     choice = None
     if prior_spec is None:
         result = _identified(model, obs, unidentifiable, options, None, regularise)
@@ -109,7 +109,8 @@ def calibrate(
             scales=(None, 1.0),
         )
         choice = replace(choice, scale=1.0)
-        prior = Prior(ranges, choice.noise_sigma_m)
+        widths = np.where(np.asarray(model.params.is_gain, bool), np.inf, ranges)  # gains free
+        prior = Prior(widths, choice.noise_sigma_m)
         result = _identified(model, obs, unidentifiable, options, prior, False)
     try:
         verdict, residual, structure = judge(model, obs, result, accuracy, max_ratio, picked)
@@ -130,7 +131,7 @@ def calibrate(
         result=result,
         verdict=verdict,
         residual=residual,
-        weak=weakly_identified(result.names, result.std_errors, model.params.is_angle, prior_spec),
+        weak=weakly_identified(result.names, result.std_errors, model.params, prior_spec),
         groups=collinear_groups(est_names, cov_k),
         correlations=correlation_pairs(est_names, cov_k),
         prior_spec=prior_spec,
@@ -201,7 +202,7 @@ def judge(
     odd = implausible_estimates(
         result.names,
         params.to_display(result.values),
-        params.is_angle,
+        params.display_units(),
         params.to_display(np.nan_to_num(result.std_errors)),
     )
     count = np.maximum(keep.sum(axis=1), 1)
@@ -243,7 +244,7 @@ def result_content(run: CalibrationRun, model_path: str, errors_path: str, data_
     res, params = run.result, run.model.params
     shown = params.to_display(res.values)
     std = params.to_display(res.std_errors)
-    units = ["deg" if a else "mm" for a in params.is_angle]
+    units = params.display_units()
     reasons = res.report.unidentifiable
     parameters = {}
     for n, v, s, u, e in zip(res.names, shown, std, units, res.estimated, strict=True):
@@ -295,9 +296,10 @@ def prior_content(run: CalibrationRun) -> dict[str, Any] | None:
     choice = run.regularisation
     if choice is None or choice.scale is None:
         return None
-    ranges = physical_ranges(run.model.params.is_angle, run.prior_spec)
+    ranges = physical_ranges(run.model.params, run.prior_spec)
     is_angle = np.asarray(run.model.params.is_angle, dtype=bool)
-    length = float(ranges[~is_angle][0]) * 1e3 * choice.scale if (~is_angle).any() else None
+    is_length = ~is_angle & ~np.asarray(run.model.params.is_gain, dtype=bool)
+    length = float(ranges[is_length][0]) * 1e3 * choice.scale if is_length.any() else None
     angle = float(np.degrees(ranges[is_angle][0])) * choice.scale if is_angle.any() else None
     return {
         "length_mm": length,

@@ -176,11 +176,20 @@ def test_noise_free_recovery_of_geometry_and_gains(name, request, tmp_path_facto
     obs = Observations(commands, readings.readings.mean(axis=2))
     res = identify(model, obs, unidentifiable="fix")
     assert res.converged
-    assert np.array_equal(res.estimated, free)
+    assert res.estimated.sum() == free.sum()
     err = np.abs(res.values - truth)
-    assert np.max(err[~params.is_gain]) < 1e-11  # m, rad
+    # of an exactly redundant group identify may fix another member than the truth's zero
+    # (the one that keeps the estimates smallest): the geometry agrees with the truth up to
+    # the groups' directions, so it is compared where it acts, on the targets
     assert np.max(err[params.is_gain]) * 1e6 < 1e-6  # ppm
+    if np.array_equal(res.estimated, free):
+        assert np.max(err[~params.is_gain]) < 1e-11  # m, rad
     assert res.residual_rms < 1e-12
+    # and the two give the same machine wherever it moves
+    other = (commands[:-1] + commands[1:]) / 2  # other poses: strokes are boxes, convex
+    got = model.predict(res.values, other).targets
+    want = measure(truth_mech, other, EXACT, np.random.default_rng(1), effects=[gains])
+    assert np.max(np.abs(got - want.readings.mean(axis=2))) < 1e-11
     # without the gains the same geometry cannot follow these readings
     alone = identify(CalibrationModel(mech, geometry), obs, unidentifiable="fix")
     assert alone.residual_rms > 1e4 * res.residual_rms

@@ -39,10 +39,9 @@ def test_compensation_through_the_commands_lowers_the_true_error(arm_run):
         assert e["verify_as_is_test"]["rms_mm"] == pytest.approx(
             v["test"]["after"]["rms_mm"], rel=0.05
         )
-    assert one["compensation"]["after"]["rms_mm"] < 0.5 * one["compensation"]["before"]["rms_mm"]
-    assert (
-        three["compensation"]["after"]["rms_mm"] < 0.15 * three["compensation"]["before"]["rms_mm"]
-    )
+        # which of the two takes the offset is the fit's choice (the smaller estimates): the
+        # tool point then misses by a reflector's or the flange's offset, of the truth's size
+        assert c["after"]["rms_mm"] < 0.5 * c["before"]["rms_mm"]
     for name in (
         "one_reflector_commands.csv",
         "one_reflector_calibrated.xml",
