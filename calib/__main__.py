@@ -7,6 +7,10 @@
                              [--set test] [--out V.json]
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
                              [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
+    python -m calib compensate --model M.xml --errors E.toml --result R.json
+                             --poses desired.csv --out commands.csv [--frame base|tracker]
+    python -m calib export   --model M.xml --errors E.toml --result R.json
+                             --out M_calibrated.xml [--dh-out T.csv]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
@@ -16,14 +20,17 @@ where that predicts held-out poses no worse (``--plain``: never). ``--with D.jso
 effect a diagnosis named to the error model. ``verify`` scores any set before (nominal) and
 after (identified): the 3D position error per reading (RMS, mean, max), a per-reading CSV and
 a PNG. ``diagnose`` asks whether the residual is more than the tracker noise and which
-physical effect explains it, judged on held-out poses.
+physical effect explains it, judged on held-out poses. ``compensate`` turns desired tool
+poses into the commands that put the identified machine there; ``export`` writes the
+calibrated model (MJCF; DH table for a DH-generated arm); ``verify`` without ``--result``
+scores a model as it is.
 
 Exit codes (calib.verdict): 0 success (a residual above the tracker noise is said, not
 refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
 do not fit the model (a likely data error named, too many outliers, implausible estimates
 the data determine well, an implausible residual, or a residual above an explicit
-``--max-ratio``); verify of a result identify refused exits with identify's code; 130
-interrupted.
+``--max-ratio``); verify of a result identify refused exits with identify's code; 5 some
+desired poses out of reach (compensate); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib import cmd_compensate, cmd_export
 from calib.atomic_files import write_json_atomic, write_text_atomic
 from calib.cli_common import (
     positive_float,
@@ -149,6 +157,12 @@ def _refused(loaded) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
+    if args.result is None:  # the model as it is, e.g. one written by export
+        from calib import verify_as_is
+
+        return verify_as_is.run(args)
+    if args.errors is None:
+        raise CalibError("verify --result needs --errors (the error model of the result)")
     model = model_from_files(args.model, args.errors)
     loaded = load_result(args.result, expected_model=model.nominal.name)
     model = model_for_result(model, loaded.data)
@@ -183,9 +197,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return refused
 
 
-def _model_options(p: argparse.ArgumentParser) -> None:
+def _model_options(p: argparse.ArgumentParser, errors_required: bool = True) -> None:
     p.add_argument("--model", required=True, help="nominal MJCF of the machine")
-    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
+    p.add_argument(
+        "--errors", required=errors_required, help="error model (TOML [[parameter]] list)"
+    )
     p.add_argument("--data", required=True, help="Dataset CSV (with its .json sidecar)")
     p.add_argument("--out", help="write the result as JSON here (atomically)")
 
@@ -260,8 +276,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="(the default now) keep unidentifiable parameters at zero",
     )
     ver = sub.add_parser("verify", help="score a dataset before and after a calibration")
-    _model_options(ver)
-    ver.add_argument("--result", required=True, help="result JSON written by identify --out")
+    _model_options(ver, errors_required=False)
+    ver.add_argument(
+        "--result",
+        help="result JSON written by identify --out; without it the model is scored as it is "
+        "(e.g. one written by export), a tracker frame registered on the calibration rows",
+    )
     ver.add_argument("--set", help="score the rows of this set (default: all rows)")
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
@@ -284,10 +304,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--test-set",
         help="hold out the rows of this set (of --test FILE, or of --data) as the test set",
     )
+    for command in (cmd_compensate, cmd_export):  # each subcommand in its own module
+        command.add_parser(sub)
     return parser
 
 
 COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
+COMMANDS.update({"compensate": cmd_compensate.run, "export": cmd_export.run})
 
 
 def main(argv: list[str] | None = None) -> int:

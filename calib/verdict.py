@@ -18,6 +18,7 @@ residual into a failure for a user who wants that gate. Exit codes:
     4  the data do not fit the model: a likely data error named, too many outliers,
        implausible well-determined estimates, an implausible residual, or a residual above
        an explicit ``--max-ratio``
+    5  compensate: some desired poses are out of reach (each is named; the others written)
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_POOR_FIT = 4
+EXIT_UNREACHABLE = 5
 DEFAULT_MAX_RATIO: float | None = None  # no gate on the residual's size unless asked
 # an estimate beyond these is not a manufacturing or assembly error but a fit that went
 # astray (a length error of 5 cm on a machine built to tenths of a millimetre)

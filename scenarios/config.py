@@ -600,6 +600,14 @@ SCHEMAS: dict[str, Table] = {
         truth=Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
         tracker=_ARM_TRACKER,
         plan=_ARM_PLAN,
+        compensation=Table(
+            {
+                "desired_poses": _COUNT,
+                "joint_fraction": Key(float, required=True, above=0, max=1),
+                "stroke_margin_deg": Key(float, required=True, min=0),
+            },
+            required=True,
+        ),
         variants=Table(
             {
                 "three_reflectors": Table(
