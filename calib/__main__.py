@@ -1,23 +1,36 @@
 """Command line for measured data (any machine: serial, parallel or hybrid).
 
     python -m calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
-                             [--out R.json] [--sigma-mm S] [--prior-std length=1,angle=0.1]
+                             [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
+                             [--with D.json]
     python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
                              [--set test] [--out V.json]
-    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--sigma-mm S]
-                             [--test T.csv] [--out D.json]
+    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
+                             [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
+    python -m calib compensate --model M.xml --errors E.toml --result R.json
+                             --poses desired.csv --out commands.csv [--frame base|tracker]
+    python -m calib export   --model M.xml --errors E.toml --result R.json
+                             --out M_calibrated.xml [--dh-out T.csv]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
 frame or, for a sidecar with "frame": "tracker", with the tracker's registration estimated
-alongside. ``verify`` scores any set before (nominal) and after (identified): the 3D position
-error per reading (RMS, mean, max), a per-reading CSV and a PNG. ``diagnose`` asks whether the
-residual is more than the tracker noise and which physical effect explains it.
+alongside; directions the data determine worse than their physical range are kept at zero
+where that predicts held-out poses no worse (``--plain``: never). ``--with D.json`` adds the
+effect a diagnosis named to the error model. ``verify`` scores any set before (nominal) and
+after (identified): the 3D position error per reading (RMS, mean, max), a per-reading CSV and
+a PNG. ``diagnose`` asks whether the residual is more than the tracker noise and which
+physical effect explains it, judged on held-out poses. ``compensate`` turns desired tool
+poses into the commands that put the identified machine there; ``export`` writes the
+calibrated model (MJCF; DH table for a DH-generated arm); ``verify`` without ``--result``
+scores a model as it is.
 
-Exit codes (calib.verdict): 0 success; 2 bad input (the message names the cause); 3 the fit
-did not converge; 4 the data does not fit the model (residual far above the declared tracker
-accuracy, implausible estimates, or too many outliers; the likely cause is said); 130
-interrupted.
+Exit codes (calib.verdict): 0 success (a residual above the tracker noise is said, not
+refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
+do not fit the model (a likely data error named, too many outliers, implausible estimates
+the data determine well, an implausible residual, or a residual above an explicit
+``--max-ratio``); verify of a result identify refused exits with identify's code; 5 some
+desired poses out of reach (compensate); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -25,116 +38,42 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import math
 import os
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from calib import cmd_compensate, cmd_export
 from calib.atomic_files import json_text
+from calib.cli_common import (
+    positive_int,
+    print_verdict,
+    prior_spec,
+    ratio_float,
+    run_fit,
+    sigma_float,
+)
+from calib.cli_diagnose import cmd_diagnose
 from calib.dataset import DatasetError, read_dataset, sidecar_path
+from calib.effect_kinds import model_for_result
 from calib.exceptions import CalibError
 from calib.identify import model_from_files
-from calib.prior import PriorSpec
 from calib.result_file import load_result, result_text
 from calib.verdict import (
     DEFAULT_MAX_RATIO,
     EXIT_BAD_INPUT,
     EXIT_OK,
-    EXIT_POOR_FIT,
-    MAX_SIGMA_MM,
-    Verdict,
 )
 from calib.workflow import (
     CalibrationRun,
-    FitFailed,
-    calibrate,
+    regularisation_text,
     rejected_rows,
     result_content,
     verify_result,
 )
 from calib.write_set import write_files
 from twin.exceptions import TwinError
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0 (NaN, inf, 0 and negatives are refused)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return value
-
-
-def sigma_float(text: str) -> float:
-    """argparse type: a tracker accuracy in mm, finite, > 0 and at most MAX_SIGMA_MM."""
-    value = positive_float(text)
-    if value > MAX_SIGMA_MM:
-        raise argparse.ArgumentTypeError(
-            f"{value:g} mm is beyond {MAX_SIGMA_MM:g} mm: no measuring system of a machine is "
-            "that coarse (the value is in millimetres per coordinate)"
-        )
-    return value
-
-
-def ratio_float(text: str) -> float:
-    value = positive_float(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {text!r}")
-    return value
-
-
-def positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return value
-
-
-def prior_spec(text: str) -> PriorSpec:
-    try:
-        return PriorSpec.parse(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _print_verdict(verdict: Verdict) -> None:
-    stream = sys.stdout if verdict.ok else sys.stderr
-    print(verdict.message, file=stream)
-    for hint in verdict.hints:
-        print(f"  likely cause: {hint}", file=stream)
-
-
-def _failed(exc: FitFailed) -> int:
-    print(f"FAILED: {exc}", file=sys.stderr)
-    for hint in exc.hints:
-        print(f"  likely cause: {hint}", file=sys.stderr)
-    return EXIT_POOR_FIT if exc.poor_data else EXIT_BAD_INPUT
-
-
-def _run(args: argparse.Namespace) -> CalibrationRun | int:
-    model = model_from_files(args.model, args.errors)
-    dataset = read_dataset(args.data, expected_model=model.nominal.name)
-    try:
-        return calibrate(
-            model,
-            dataset,
-            set_name=args.set,
-            sigma_mm=args.sigma_mm,
-            max_ratio=args.max_ratio,
-            max_iterations=args.max_iterations,
-            unidentifiable="raise" if getattr(args, "require_all", False) else "fix",
-            prior_spec=getattr(args, "prior_std", None),
-        )
-    except FitFailed as exc:
-        return _failed(exc)
 
 
 def _print_run(run: CalibrationRun) -> None:
@@ -166,10 +105,9 @@ def _print_run(run: CalibrationRun) -> None:
         )
     shown, std = params.to_display(res.values), params.to_display(res.std_errors)
     weak = {w["name"] for w in run.weak}
-    for name, v, s, ang, est in zip(
-        res.names, shown, std, params.is_angle, res.estimated, strict=True
+    for name, v, s, unit, est in zip(
+        res.names, shown, std, params.display_units(), res.estimated, strict=True
     ):
-        unit = "deg" if ang else "mm"
         if est:
             tail = f"+- {s:.4f}" + ("  weakly identified" if name in weak else "")
         else:
@@ -178,20 +116,29 @@ def _print_run(run: CalibrationRun) -> None:
     if run.weak:
         print(
             f"{len(run.weak)} parameter(s) weakly identified (standard error above half the "
-            "prior range); consider --prior-std or more poses over a larger volume"
+            "physical range); more poses over a larger volume determine them better"
         )
+    print(regularisation_text(run))
     for group in run.groups[:5]:
         print(f"  near-collinear (|r| > 0.95): {', '.join(group)}")
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
-    run = _run(args)
+    run = run_fit(args)
     if isinstance(run, int):
         return run
     _print_run(run)
-    _print_verdict(run.verdict)
+    print_verdict(run.verdict)
     if args.out:
         content = result_content(run, args.model, args.errors, args.data)
+        if args.with_effect:
+            base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
+            content["with"] = str(args.with_effect)
+            content["added_parameters"] = [
+                {"name": p.name, "kind": p.kind, "element": p.element, "axis": list(p.axis)}
+                for p in run.model.params.parameters
+                if p.name not in base
+            ]
         write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
 
@@ -204,10 +151,32 @@ def _csv_text(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
+def _refused(loaded) -> int:
+    """The exit code identify gave the result (0 if it was accepted or does not say)."""
+    verdict = loaded.data.get("verdict") or {}
+    code = verdict.get("exit_code", EXIT_OK)
+    return code if isinstance(code, int) and not isinstance(code, bool) else EXIT_OK
+
+
 def cmd_verify(args: argparse.Namespace) -> int:
+    if args.result is None:  # the model as it is, e.g. one written by export
+        from calib import verify_as_is
+
+        return verify_as_is.run(args)
+    if args.errors is None:
+        raise CalibError("verify --result needs --errors (the error model of the result)")
     model = model_from_files(args.model, args.errors)
     loaded = load_result(args.result, expected_model=model.nominal.name)
+    model = model_for_result(model, loaded.data)
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
+    refused = _refused(loaded)
+    if refused != EXIT_OK:
+        message = (loaded.data.get("verdict") or {}).get("message", "")
+        print(
+            f"REFUSED RESULT: identify refused this result (exit {refused}): {message}; the "
+            "scores below are of a fit the data did not support",
+            file=sys.stderr,
+        )
     v, selection = verify_result(model, loaded, dataset, args.set)
     print(selection)
     print(v.note)
@@ -232,143 +201,14 @@ def cmd_verify(args: argparse.Namespace) -> int:
             make_parents=True,
         )
         print(f"wrote {out}, {out.with_suffix('.csv')} and {out.with_suffix('.png')}")
-    return EXIT_OK
+    return refused
 
 
-def _diagnosis_test_set(args: argparse.Namespace, run: CalibrationRun):
-    """The --test file as a TestSet in the base frame (through the calibration's
-    registration for tracker-frame data), or None."""
-    from calib.diagnosis import TestSet
-    from calib.identify import bind_dataset
-
-    if not args.test:
-        return None
-    ds = read_dataset(args.test, expected_model=run.model.nominal.name)
-    obs = bind_dataset(run.model.nominal, ds)
-    if obs.frame != run.obs.frame:
-        raise DatasetError(
-            f"the test data is in the '{obs.frame}' frame but the calibration data in "
-            f"'{run.obs.frame}'"
-        )
-    measured = obs.measured
-    if run.result.registration is not None:
-        measured = run.result.registration.to_base(measured)
-    return TestSet(
-        obs.commands,
-        measured,
-        None if ds.order is None else np.asarray(ds.order),
-        None if ds.time_s is None else np.asarray(ds.time_s),
-    )
-
-
-def _typed_sigma_mm(args: argparse.Namespace, run: CalibrationRun) -> float | None:
-    if args.sigma_mm is not None:
-        return args.sigma_mm
-    sigma = (run.dataset.tracker or {}).get("sigma_mm")
-    return None if sigma is None else float(sigma)
-
-
-def cmd_diagnose(args: argparse.Namespace) -> int:
-    from calib.diagnosis import diagnose
-
-    run = _run(args)
-    if isinstance(run, int):
-        return run
-    if not run.verdict.ok:
-        print(
-            "the geometric fit the diagnosis starts from is not usable; fix the data first",
-            file=sys.stderr,
-        )
-        _print_verdict(run.verdict)
-        return run.verdict.exit_code
-    head = (run.dataset.tracker or {}).get("position_mm")
-    obs = run.obs
-    if run.result.registration is not None:  # the diagnosis works in the base frame
-        obs = replace(obs, measured=run.result.registration.to_base(obs.measured), frame="base")
-    test = _diagnosis_test_set(args, run)
-    typed = _typed_sigma_mm(args, run)
-    ds = run.dataset
-    if typed is None and ds.n_repeats < 2:
-        raise DatasetError(
-            "no noise level: give --sigma-mm, a sidecar tracker.sigma_mm, or data with repeats"
-        )
-    diag = diagnose(
-        run.model,
-        obs,
-        run.result,
-        None if typed is None else typed * 1e-3,
-        order=ds.order,
-        time_s=ds.time_s,
-        repeat_std_m=ds.repeat_std if ds.n_repeats > 1 else None,
-        n_repeats=ds.n_repeats,
-        tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
-        test=test,
-    )
-    noise = diag.noise.as_dict() if diag.noise is not None else {}
-    print(
-        f"geometric residual {diag.residual_rms_mm:.4f} mm RMS per coordinate; noise "
-        f"{diag.noise_floor_rms_mm:.4f} mm per coordinate ({noise.get('source', 'typed')}); "
-        f"chi-square p = {diag.chi2_p_value:.3g}"
-    )
-    print(f"diagnosis: {diag.chosen} ({diag.reason})")
-    for note in diag.notes:
-        print(f"  note: {note}")
-    for name, entry in diag.effect_parameters.items():
-        for pname, v in entry.items():
-            std = "" if v["std"] is None else f" +- {v['std']:.3g}"
-            value = v["value"] if isinstance(v["value"], str) else f"{v['value']:.4g}"
-            print(f"  {name}: {pname} = {value}{std} {v['unit']}")
-    for name, score in diag.scores.items():
-        tail = "" if score.test_rms_mm is None else f", test RMS {score.test_rms_mm:.5f} mm (3D)"
-        refused = f"  REFUSED: {score.refused}" if score.refused else ""
-        print(
-            f"  {name:24s} held-out RMS blocked {score.heldout_blocked_mm:.5f} / random "
-            f"{score.heldout_random_mm:.5f} mm{tail}{refused}"
-        )
-    if diag.test is not None:
-        for side in ("before", "after"):
-            t = diag.test[side]
-            print(
-                f"test {side:6s}: 3D position error per reading RMS {t['rms_mm']:.4f} mm, "
-                f"mean {t['mean_mm']:.4f} mm, max {t['max_mm']:.4f} mm"
-            )
-    if args.out:
-        out = Path(args.out)
-        content = {
-            "residual": run.residual,
-            "residual_rms_mm_per_coordinate": diag.residual_rms_mm,
-            "noise_floor_rms_mm_per_coordinate": diag.noise_floor_rms_mm,
-            "noise": noise,
-            "chi2_p_value": diag.chi2_p_value,
-            "diagnosed_effect": diag.chosen,
-            "reason": diag.reason,
-            "notes": list(diag.notes),
-            "rejected": rejected_rows(run),
-            "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
-            "heldout_rms_mm_per_coordinate": diag.heldout,
-            "refused": {n: s.refused for n, s in diag.scores.items() if s.refused},
-            "effect_parameters": diag.effect_parameters,
-            "residual_structure": diag.structure_detail,
-            "metric": "3D position error per reading |p_measured - p_model| (mm)",
-        }
-        if diag.test is not None:
-            content["test"] = {
-                side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
-                for side in ("before", "after")
-            }
-        files: dict = {}
-        if diag.plot is not None:
-            from calib.diagnosis_figure import save_diagnosis_png
-
-            content["figure"] = str(out.with_suffix(".png"))
-            files[out.with_suffix(".png")] = lambda tmp: save_diagnosis_png(diag, tmp)
-        write_files({out: json_text(content), **files}, make_parents=True)  # both, or neither
-    return EXIT_OK
-
-
-def _model_options(p: argparse.ArgumentParser) -> None:
+def _model_options(p: argparse.ArgumentParser, errors_required: bool = True) -> None:
     p.add_argument("--model", required=True, help="nominal MJCF of the machine")
-    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
+    p.add_argument(
+        "--errors", required=errors_required, help="error model (TOML [[parameter]] list)"
+    )
     p.add_argument("--data", required=True, help="Dataset CSV (with its .json sidecar)")
     p.add_argument("--out", help="write the result as JSON here (atomically)")
 
@@ -384,7 +224,8 @@ def _fit_options(p: argparse.ArgumentParser) -> None:
         type=ratio_float,
         default=DEFAULT_MAX_RATIO,
         help="fail (exit 4) when the 3D RMS residual exceeds this many times the noise the "
-        f"tracker accuracy explains (default {DEFAULT_MAX_RATIO:g})",
+        "tracker accuracy explains (default: no such gate; a residual above the noise is "
+        "reported, and is what `diagnose` is for)",
     )
     p.add_argument(
         "--max-iterations",
@@ -416,6 +257,21 @@ def build_parser() -> argparse.ArgumentParser:
         "(keeps weakly identified parameters physical)",
     )
     ident.add_argument(
+        "--plain",
+        action="store_true",
+        help="plain least squares over every identifiable parameter: keep no weakly "
+        "determined direction at zero (the default does so where cross-validation over the "
+        "poses says it predicts held-out readings no worse)",
+    )
+    ident.add_argument(
+        "--with",
+        dest="with_effect",
+        metavar="D.json",
+        help="add the effect a diagnosis named (diagnose --out D.json) to the error model as "
+        "its static parameters (actuator gains, reflector offsets, joint-axis tilts) and fit "
+        "geometry and effect together",
+    )
+    ident.add_argument(
         "--require-all",
         action="store_true",
         help="stop (exit 2) if the poses cannot identify every parameter, instead of keeping "
@@ -427,8 +283,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="(the default now) keep unidentifiable parameters at zero",
     )
     ver = sub.add_parser("verify", help="score a dataset before and after a calibration")
-    _model_options(ver)
-    ver.add_argument("--result", required=True, help="result JSON written by identify --out")
+    _model_options(ver, errors_required=False)
+    ver.add_argument(
+        "--result",
+        help="result JSON written by identify --out; without it the model is scored as it is "
+        "(e.g. one written by export), a tracker frame registered on the calibration rows",
+    )
     ver.add_argument("--set", help="score the rows of this set (default: all rows)")
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
@@ -444,33 +304,49 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument(
         "--test",
         help="a Dataset CSV of poses not used to fit: an effect is named only if it lowers "
-        "their error too; the JSON gets test.before and test.after",
+        "their error too (and not their largest); the JSON gets test.before and test.after. "
+        "Its 'test' rows if it has any (or --test-set NAME), else its rows not fitted",
     )
+    diag.add_argument(
+        "--test-set",
+        help="hold out the rows of this set (of --test FILE, or of --data) as the test set",
+    )
+    for command in (cmd_compensate, cmd_export):  # each subcommand in its own module
+        command.add_parser(sub)
     return parser
 
 
 COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
-WRITTEN_BESIDE = {"identify": (), "verify": (".csv", ".png"), "diagnose": (".png",)}
+COMMANDS.update({"compensate": cmd_compensate.run, "export": cmd_export.run})
+# the files each command writes beside --out (same name, another suffix)
+WRITTEN_BESIDE = {
+    "identify": (),
+    "verify": (".csv", ".png"),
+    "diagnose": (".png",),
+    "compensate": (".json",),
+    "export": (),
+}
 
 
 def check_out(args: argparse.Namespace) -> None:
     """Refuse, before any work, an ``--out`` whose files would overwrite an input or each
     other (``verify --out v.csv``) or that names a folder."""
-    if not args.out:
+    if not getattr(args, "out", None):
         return
     out = Path(args.out)
-    outs = [out, *(out.with_suffix(s) for s in WRITTEN_BESIDE[args.command])]
+    outs = [out, *(out.with_suffix(s) for s in WRITTEN_BESIDE.get(args.command, ()))]
+    if getattr(args, "dh_out", None):
+        outs.append(Path(args.dh_out))
     if len(set(outs)) < len(outs):
-        beside = " and ".join(WRITTEN_BESIDE[args.command])
         raise ValueError(
-            f"--out {out}: name the JSON file (e.g. {out.with_suffix('.json').name}); the "
-            f"{beside} files are written beside it with the same name"
+            f"--out {out}: a file written beside it would take its own name; give the main "
+            "file its own suffix (verify and diagnose: .json, compensate: .csv)"
         )
     if out.is_dir():
-        raise ValueError(f"--out {out} is a folder; name the JSON file to write")
-    inputs = [args.model, args.errors, args.data, getattr(args, "result", None)]
-    inputs += [getattr(args, "test", None)]
-    inputs += [str(sidecar_path(p)) for p in (args.data, getattr(args, "test", None)) if p]
+        raise ValueError(f"--out {out} is a folder; name the file to write")
+    inputs = [getattr(args, k, None) for k in ("model", "errors", "data", "result", "test")]
+    inputs += [getattr(args, "poses", None)]
+    inputs += [str(sidecar_path(p)) for p in inputs[2:] if p and str(p).endswith(".csv")]
     for o in outs:
         for i in inputs:
             if i and o.exists() and Path(i).exists() and os.path.samefile(o, i):

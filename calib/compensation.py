@@ -12,20 +12,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.compensate_poses import solve_each
 from calib.model import CalibrationModel
-from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import inverse
 from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
-from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.workspace import commands_for_poses
 
 
 def compensated_commands(
     model: CalibrationModel, values: np.ndarray, poses: np.ndarray
 ) -> np.ndarray:
-    """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected."""
-    return commands_for_poses(model.mechanism(values), poses)
+    """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected
+    (through its actuator gains, if it has any)."""
+    return model.commands_for_joints(values, commands_for_poses(model.mechanism(values), poses))
 
 
 def reachable_compensated_commands(
@@ -33,17 +33,12 @@ def reachable_compensated_commands(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Like :func:`compensated_commands`, but a pose whose compensated commands leave a
     stroke is reported (mask False, its row NaN) instead of stopping the whole set: near the
-    workspace boundary the real machine may not reach what its nominal model could."""
-    mech = model.mechanism(values)
-    out = np.full((len(poses), mech.n_actuators), np.nan)
-    ok = np.zeros(len(poses), dtype=bool)
-    for i, pose in enumerate(np.atleast_2d(poses)):
-        try:
-            out[i] = commands_for_poses(mech, pose[None])[0]
-            ok[i] = True
-        except (WorkspaceError, ClosureError):
-            continue
-    return out, ok
+    workspace boundary the real machine may not reach what its nominal model could. The
+    same solve, pose by pose from home, as ``python -m calib compensate``
+    (calib.compensate_poses.solve_each), the joint values turned into commands through the
+    model's actuator gains (if any)."""
+    solved = solve_each(model.mechanism(values), poses)
+    return model.commands_for_joints(values, solved.commands), solved.reachable
 
 
 def corrected_poses(poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
@@ -85,7 +80,7 @@ class TwistCompensation:
             q = None
             for i, pose in enumerate(poses):  # each pose started from the previous solution
                 q = qpos[i] = inverse(mech, pose, start=q).qpos
-        jac = tool_twist_jacobian_batch(mech, model.params, base_values, qpos)
+        jac = model.tool_twist_jacobian(base_values, qpos)
         return cls(model, base_values, poses, qpos, jac, actuator_twist_jacobians(mech, qpos))
 
     def commands(self, delta: np.ndarray, columns: np.ndarray) -> np.ndarray:
@@ -96,7 +91,8 @@ class TwistCompensation:
         corrected = corrected_poses(self.poses, twists)
         # every pose at once, each from its first inverse kinematics (the same exact inverse
         # kinematics as twin.kinematics.inverse, to round-off; the same errors)
-        return inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
+        joints = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
+        return self.model.commands_for_joints(self.base_values, joints)
 
 
 def twist_compensated_commands(

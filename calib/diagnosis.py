@@ -14,8 +14,11 @@
    physical explains a residual that a kernel correction over some pose variable does
    explain on held-out poses, the answer is "unexplained: correlated with <variable>".
 
-The naming depends on held-out errors only, never on the sigma: the chi-square is reported,
-and the verdict is the same for any plausible sigma.
+The naming depends on held-out errors, and on the sigma in one place only: when the residual
+passes the chi-square noise test, an effect must also lower the held-out mean square by more
+than the noise moves it (three standard deviations of the mean square of pure noise), so that
+the verdict is consistent with its own test ("none" otherwise). Nothing named where the
+residual exceeds the noise is "unexplained", with the structure the residual shows.
 
 Modules: the candidates (calib.diagnosis_candidates) and what they see of each pose
 (calib.diagnosis_context, calib.diagnosis_gravity); fitting and nested cross-validation
@@ -48,13 +51,14 @@ from calib.diagnosis_candidates import (
     default_candidates,
     library,
 )
-from calib.diagnosis_context import build_context
+from calib.diagnosis_context import build_context, reflector_span
 from calib.diagnosis_fit import SCHEMES, Evaluation, Problem, fold_labels
 from calib.diagnosis_noise import NoiseLevel, check_against_residual, chi_square_p, noise_level
 from calib.diagnosis_plot import plot_data, plot_unexplained
 from calib.diagnosis_select import select_effects
 from calib.diagnosis_testset import (
     kernel_test,
+    rigid_columns,
     stats_3d,
     test_after,
     test_context,
@@ -76,6 +80,7 @@ from calib.diagnosis_verdict import (
 )
 from calib.identify import IdentificationResult, Observations
 from calib.model import CalibrationModel
+from calib.rank_structure import describe
 from twin.kinematics_fast import on_one_blas_thread
 
 __all__ = [
@@ -141,6 +146,7 @@ def diagnose(
     n_repeats: int = 1,
     test: TestSet | None = None,
     max_effects: int = 3,
+    registration: bool = False,
 ) -> Diagnosis:
     """Diagnose the residual of a geometric calibration ``result`` on ``obs``.
 
@@ -149,7 +155,10 @@ def diagnose(
     ``test``: poses that took no part in the fit (commands, base-frame readings, their order):
     an effect must lower their error too. ``min_gain``: the relative drop of the held-out RMS
     an effect must bring in every fold scheme; ``alpha``: the one-sided Wilcoxon level of the
-    per-pose held-out improvement."""
+    per-pose held-out improvement. ``registration``: the readings were carried into the base
+    frame by a registration fitted with the geometry (tracker-frame data): its rigid motion
+    is refitted beside the geometry, or an effect's fit could not undo what the
+    registration absorbed of it."""
     n_poses = len(obs.commands)
     time, unit = _time(order, time_s, n_poses)
     t0 = float(np.min(time))
@@ -162,9 +171,10 @@ def diagnose(
     noise = noise_level(sigma_m, repeat_std_m, n_repeats)
     sum_sq = float(np.sum(r**2))
     p_value = chi_square_p(sum_sq, noise.sigma_m, n - p)
-    geo = (
-        model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p) * keep[:, :, None]
-    )
+    geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p)
+    if registration:
+        geo = np.concatenate([geo, rigid_columns(pred.targets)], axis=2)
+    geo = geo * keep[:, :, None]
     head = None if tracker_position_m is None else np.asarray(tracker_position_m, dtype=float)
     ctx = build_context(
         model, values, obs.commands, time - t0, unit, pred.qpos, pred.targets, head=head, rows=keep
@@ -181,17 +191,27 @@ def diagnose(
     tctx = tr = None
     if test is not None:
         tctx = test_context(model, values, test, t0, unit, ctx, head)
-        tr = test_residual(model, values, result.estimated, test, tctx)
+        tr = test_residual(model, values, result.estimated, test, tctx, registration)
     test_of: dict[tuple[str, ...], np.ndarray] = {}
 
-    def test_rms(ev: Evaluation, cs: list[Candidate]) -> float | None:
+    def test_errs(ev: Evaluation, cs: list[Candidate]) -> np.ndarray | None:
         if tctx is None:
             return None
         if ev.names not in test_of:
             test_of[ev.names] = test_errors(tr, tctx, cs, ev)
-        return float(np.sqrt(np.mean(test_of[ev.names] ** 2)))
+        return test_of[ev.names]
 
-    sel = select_effects(prob, ctx, fold_sets, cands, n, alpha, min_gain, max_effects, test_rms)
+    def test_rms(ev: Evaluation, cs: list[Candidate]) -> float | None:
+        e = test_errs(ev, cs)
+        return None if e is None else float(np.sqrt(np.mean(e**2)))
+
+    excess = p_value < alpha
+    # within noise: a held-out mean-square gain below 3 standard deviations of the mean square
+    # of n rows of pure noise (chi-square: sigma^2 sqrt(2 / n))
+    noise_ms = None if excess else 3.0 * noise.sigma_m**2 * np.sqrt(2.0 / max(n, 1))
+    sel = select_effects(
+        prob, ctx, fold_sets, cands, n, alpha, min_gain, max_effects, test_errs, noise_ms
+    )
     notes += [f"{k} refused: {why}" for k, why in sel.refused.items()]
     base, singles = sel.base, sel.singles
     scores = {"none": score_of("none", base, prob, ctx, [], test_rms(base, []))}
@@ -204,7 +224,7 @@ def diagnose(
         residual_rms_mm=float(np.sqrt(sum_sq / n)) * 1e3,
         noise_floor_rms_mm=noise.sigma_m * 1e3,
         chi2_p_value=p_value,
-        excess=p_value < alpha,
+        excess=excess,
         scores=scores,
         structure=residual_structure(r, pred.targets, obs.commands, time, keep),
         noise=noise,
@@ -240,9 +260,9 @@ def diagnose(
             **common,
             chosen="+".join(names),
             reason=reason,
-            geometry_correction=ev.fit.beta,
+            geometry_correction=ev.fit.beta[:p],
             coefficients=_coefficients(chosen, ev),
-            effect_parameters=effect_parameters(prob, ctx, chosen, ev),
+            effect_parameters=effect_parameters(prob, ctx, chosen, ev, reflector_span(model)),
             notes=tuple(notes),
             test=test_block,
             plot=plot_data(ctx, r, keep, chosen, ev, prob),
@@ -286,18 +306,21 @@ def diagnose(
             plot=plot_unexplained(ctx, r, keep, best_group, feats[best_group]),
         )
     test_block = None if tctx is None else {"before": before_stats, "after": before_stats}
+    chosen = "none"
     if not common["excess"]:
         reason = "the residual is what the tracker noise explains"
     else:
+        chosen = "unexplained"
         reason = (
-            "the residual exceeds the noise (chi-square) but no candidate, and no kernel "
-            "correction, lowers the held-out error: nothing is named"
+            f"the residual exceeds the noise (chi-square p = {p_value:.3g}) but no candidate, "
+            "and no kernel correction, lowers the held-out error; "
+            + describe(common["structure_detail"])
         )
     if sel.why_not:
         best = min(singles.values(), key=lambda e: e.heldout_rms_mm())
         if best.names and best.names[0] in sel.why_not:
             reason += f" (closest: {best.names[0]}, {sel.why_not[best.names[0]]})"
-    return Diagnosis(**common, reason=reason, notes=tuple(notes), test=test_block)
+    return Diagnosis(**common, chosen=chosen, reason=reason, notes=tuple(notes), test=test_block)
 
 
 def _schemes(ev: Evaluation) -> str:

@@ -4,9 +4,11 @@ Every candidate is first evaluated alone beside the geometry (nested cross-valid
 calib.diagnosis_fit); one that physics forbids (calib.diagnosis_verdict.refusal) is refused.
 Then effects are added one at a time, the best of those that pass, while one passes: it must
 lower the held-out RMS by ``min_gain`` in every fold scheme with a one-sided Wilcoxon
-p < ``alpha`` on the per-pose improvement, lower the user's test-set error when there is one,
-and (in a combination) stay physical. A candidate that does not help alone is not tried in a
-combination.
+p < ``alpha`` on the per-pose improvement, lower the user's test-set error when there is one
+without raising its largest error, and (in a combination) stay physical. When the residual
+passes the noise test, an effect must also lower the held-out mean square by more than noise
+moves it (``noise_ms``): a verdict consistent with its own test says "none" otherwise. A
+candidate that does not help alone is not tried in a combination.
 """
 
 from __future__ import annotations
@@ -14,13 +16,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from calib.diagnosis_candidates import Candidate
 from calib.diagnosis_context import Context
 from calib.diagnosis_fit import SCHEMES, Evaluation, Problem, evaluate
 from calib.diagnosis_verdict import improvement, refusal
 
-# (evaluation, its candidates) -> RMS of the test set's 3D errors (m), None without a test set
-TestRms = Callable[[Evaluation, list[Candidate]], float | None]
+# (evaluation, its candidates) -> the test set's 3D error per reading (m), None without one
+TestErrors = Callable[[Evaluation, list[Candidate]], "np.ndarray | None"]
 
 
 @dataclass
@@ -42,8 +46,11 @@ def select_effects(
     alpha: float,
     min_gain: float,
     max_effects: int,
-    test_rms: TestRms,
+    test_errors: TestErrors,
+    noise_ms: float | None = None,
 ) -> Selection:
+    """``noise_ms``: the held-out mean square per row (m^2) that an effect must gain beyond
+    when the residual is what the noise explains (None: the residual exceeds the noise)."""
     base = evaluate(prob, ctx, fold_sets, [], None, n_rows)
     singles, refused = {}, {}
     for c in cands:
@@ -62,9 +69,27 @@ def select_effects(
             gain, pv = improvement(cur.heldout[s], new.heldout[s])
             if gain < min_gain or pv >= alpha:
                 return False, f"{s} folds: held-out RMS {1 - gain:.3g} x, Wilcoxon p = {pv:.2g}"
-        before, after = test_rms(cur, cur_c), test_rms(new, new_c)
-        if before is not None and not after < before:
-            return False, f"the test set's error rises ({before:.4g} -> {after:.4g})"
+        if noise_ms is not None:
+            gain_ms = float(np.sum(cur.heldout[SCHEMES[0]])) - float(
+                np.sum(new.heldout[SCHEMES[0]])
+            )
+            gain_ms /= n_rows
+            if gain_ms < noise_ms:
+                return False, (
+                    "the residual passes the noise test and the held-out gain "
+                    f"({max(gain_ms, 0.0) ** 0.5 * 1e3:.3g} mm RMS) is within what noise gives "
+                    f"({noise_ms**0.5 * 1e3:.3g} mm)"
+                )
+        before, after = test_errors(cur, cur_c), test_errors(new, new_c)
+        if before is not None and after is not None:
+            rms_b, rms_a = _rms(before), _rms(after)
+            if not rms_a < rms_b:
+                return False, f"the test set's error rises ({rms_b:.4g} -> {rms_a:.4g})"
+            if float(np.max(after)) > float(np.max(before)):
+                return False, (
+                    f"the test set's largest error rises ({np.max(before) * 1e3:.4g} -> "
+                    f"{np.max(after) * 1e3:.4g} mm)"
+                )
         return True, ""
 
     sel = Selection(base, singles, refused, current=base)
@@ -95,3 +120,7 @@ def select_effects(
         sel.chosen.append(best)
         sel.current = ev
     return sel
+
+
+def _rms(errors: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(errors) ** 2)))

@@ -14,6 +14,7 @@ import numpy as np
 
 from calib.diagnosis_context import Context
 from calib.diagnosis_fit import Problem
+from calib.rank_structure import rank_correlations
 from twin.rotations import rotvec_from_matrix
 
 BANDWIDTHS = (0.15, 0.3, 0.6, 1.2, 2.5)
@@ -51,17 +52,7 @@ def structure_detail(r: np.ndarray, keep: np.ndarray, ctx: Context) -> dict[str,
     for i, n in enumerate(ctx.actuator_names):
         probes[n] = ctx.commands[:, i]
     probes["order"] = ctx.time
-    out = {}
-    for name, v in probes.items():
-        if np.ptp(v) > 0 and np.ptp(size) > 0:
-            res = _stats().spearmanr(size, v)
-            out[name] = {
-                "rho": float(np.nan_to_num(res.statistic)),
-                "p": float(np.nan_to_num(res.pvalue, nan=1.0)),
-            }
-        else:
-            out[name] = {"rho": 0.0, "p": 1.0}
-    return out
+    return rank_correlations(size, probes)
 
 
 def _smooth(x_train, e_train, x_eval, h, exclude_self=False):

@@ -75,5 +75,6 @@ def loop_commands(
         q_star = commands_for_poses(mech, poses)
     else:
         q_star = commands_near(mech, poses, *near)
-    c, it, change = invert_correction(correction, q_star, np.asarray(order), tol)
+    wanted = model.commands_for_joints(values, q_star)  # through the model's gains, if any
+    c, it, change = invert_correction(correction, wanted, np.asarray(order), tol)
     return LoopCommands(c, q_star, it, change)

@@ -16,12 +16,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 WEAK_FRACTION = 0.5  # weakly identified: std error above this fraction of the prior range
 COLLINEAR_R = 0.95
 DEFAULT_RANGE = {"length": 1.0, "angle": 0.1}  # mm, deg: assembly errors of a built machine
+# an actuator's scale (ppm): a screw's lead or a gear ratio is within a few hundred ppm, a
+# revolution-to-mm factor set by hand can be off by per cent; 1 % is the range's unit
+GAIN_RANGE_PPM = 1e4
 
 
 @dataclass(frozen=True)
@@ -56,11 +60,12 @@ class PriorSpec:
             raise ValueError("an empty prior: give length=... and/or angle=...")
         return cls(values.get("length"), values.get("angle"))
 
-    def std_si(self, is_angle: np.ndarray) -> np.ndarray:
-        """Per-parameter prior std in SI (inf where the kind has none)."""
+    def std_si(self, is_angle: np.ndarray, is_gain: np.ndarray | None = None) -> np.ndarray:
+        """Per-parameter prior std in SI (inf where the kind has none: gains have none)."""
         length = math.inf if self.length_mm is None else self.length_mm * 1e-3
         angle = math.inf if self.angle_deg is None else math.radians(self.angle_deg)
-        return np.where(np.asarray(is_angle, dtype=bool), angle, length)
+        std = np.where(np.asarray(is_angle, dtype=bool), angle, length)
+        return std if is_gain is None else np.where(np.asarray(is_gain, bool), math.inf, std)
 
     def as_dict(self) -> dict:
         return {"length_mm": self.length_mm, "angle_deg": self.angle_deg}
@@ -75,6 +80,17 @@ class Prior:
 
     def weights(self) -> np.ndarray:
         return self.noise_sigma_m / self.std  # 0 where std is inf
+
+
+def physical_ranges(params: Any, spec: PriorSpec | None = None) -> np.ndarray:
+    """Each parameter's physical range in SI: the size an error of its kind can have on a
+    built machine (``spec``'s, else ``DEFAULT_RANGE``; ``GAIN_RANGE_PPM`` for an actuator
+    gain): the unit in which the estimates' sizes are compared (calib.redundancy) and the
+    weak directions judged (calib.regularisation). ``params``: a ParameterSet."""
+    length = DEFAULT_RANGE["length"] if spec is None or spec.length_mm is None else spec.length_mm
+    angle = DEFAULT_RANGE["angle"] if spec is None or spec.angle_deg is None else spec.angle_deg
+    out = np.where(np.asarray(params.is_angle, dtype=bool), math.radians(angle), length * 1e-3)
+    return np.where(np.asarray(params.is_gain, dtype=bool), GAIN_RANGE_PPM * 1e-6, out)
 
 
 def padded_rows(weights: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -92,20 +108,19 @@ def padded_rows(weights: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndar
 def weakly_identified(
     names: tuple[str, ...],
     std_si: np.ndarray,
-    is_angle: np.ndarray,
+    params: Any,
     ranges: PriorSpec | None = None,
 ) -> list[dict]:
-    """Estimated parameters whose standard error exceeds half their prior range."""
-    spec = ranges or PriorSpec(DEFAULT_RANGE["length"], DEFAULT_RANGE["angle"])
-    length = spec.length_mm if spec.length_mm is not None else DEFAULT_RANGE["length"]
-    angle = spec.angle_deg if spec.angle_deg is not None else DEFAULT_RANGE["angle"]
+    """Estimated parameters whose standard error exceeds half their physical range
+    (``params``: the ParameterSet, for each one's kind and display unit)."""
+    width = params.to_display(physical_ranges(params, ranges))
+    shown = params.to_display(np.nan_to_num(np.asarray(std_si, dtype=float), nan=0.0))
     out = []
-    for name, s, ang in zip(names, std_si, is_angle, strict=True):
-        if not np.isfinite(s):
-            continue
-        shown, rng, unit = (math.degrees(s), angle, "deg") if ang else (s * 1e3, length, "mm")
-        if shown > WEAK_FRACTION * rng:
-            out.append({"name": name, "std": shown, "prior_range": rng, "unit": unit})
+    for name, s, sh, rng, unit in zip(
+        names, std_si, shown, width, params.display_units(), strict=True
+    ):
+        if np.isfinite(s) and sh > WEAK_FRACTION * rng:
+            out.append({"name": name, "std": float(sh), "prior_range": float(rng), "unit": unit})
     return out
 
 

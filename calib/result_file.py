@@ -83,7 +83,7 @@ def unusable_values(loaded: CalibrationResult, params: Any, cause: Exception) ->
     no closure): names the values beyond a plausible size, which are the likely reason."""
     from calib.verdict import implausible_estimates
 
-    odd = implausible_estimates(loaded.names, loaded.display_values, params.is_angle)
+    odd = implausible_estimates(loaded.names, loaded.display_values, params.display_units())
     why = (
         f"; values beyond a plausible size: {', '.join(odd[:5])}"
         + (f" and {len(odd) - 5} more" if len(odd) > 5 else "")

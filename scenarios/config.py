@@ -419,34 +419,41 @@ _POSE_NOISE = Table(
     required=True,
 )
 
-SCHEMAS: dict[str, Table] = {
-    "hexapod_paper": _base(
-        seed=_SEED,
-        truth=_truth(),
-        tracker=Table(
-            {
-                "position_mm": Key(list, required=True, item=float, length=3),
-                "noise": Key(str, required=True, check=_check_noise_spec),
-                "repeats": Key(int, min=1, max=MAX_COUNT),
-            },
-            required=True,
-        ),
-        pose_noise=_POSE_NOISE,
-        plans=Table(
-            {"noise_free_poses": _COUNT, "few_poses": _COUNT, "many_poses": _COUNT},
-            required=True,
-        ),
-        verification=Table(
-            {
-                "nodes_per_axis": _COUNT,
-                "orientations_per_node": _COUNT,
-                "margin": Key(float, min=0, below=0.5),
-                "stroke_margin_mm": _NONNEG,
-            },
-            required=True,
-        ),
-    ),
-    "liu_vs_ols": _base(
+_ARM_TRACKER = Table(
+    {
+        "position_mm": Key(list, required=True, item=float, length=3),
+        "rotation_deg": Key(list, required=True, item=float, length=3),
+        "noise": Key(str, required=True, check=_check_noise_spec),
+        "sigma_mm": Key(float, required=True, above=0),
+    },
+    required=True,
+)
+_ARM_PLAN = Table(
+    {
+        "calibration_poses": _COUNT,
+        "test_poses": _COUNT,
+        "joint_fraction": Key(float, required=True, above=0, max=1),
+    },
+    required=True,
+)
+
+PLACEMENTS = ("interpolated", "extrapolated", "tilted")
+
+
+def _check_placements(value: list, where: str) -> list[str]:
+    out = [
+        f"'{where}[{i}]': " + unknown_name_message("placement", p, list(PLACEMENTS))
+        for i, p in enumerate(value)
+        if p not in PLACEMENTS
+    ]
+    if len(set(value)) != len(value):
+        out.append(f"'{where}' names a placement twice")
+    return out
+
+
+def _liu_vs_ols_keys() -> dict[str, Key | Table]:
+    """The keys of liu_vs_ols's plan and twin (its single run, draw study and regime map)."""
+    return dict(
         seed=_SEED,
         truth=_truth(effects=Key(list, check=_check_effects)),
         tracker=Table(
@@ -475,6 +482,38 @@ SCHEMAS: dict[str, Table] = {
             required=True,
         ),
         scoring=Table({"nodes_per_side": Key(int, min=1, max=MAX_COUNT)}),
+    )
+
+
+SCHEMAS: dict[str, Table] = {
+    "hexapod_paper": _base(
+        seed=_SEED,
+        truth=_truth(),
+        tracker=Table(
+            {
+                "position_mm": Key(list, required=True, item=float, length=3),
+                "noise": Key(str, required=True, check=_check_noise_spec),
+                "repeats": Key(int, min=1, max=MAX_COUNT),
+            },
+            required=True,
+        ),
+        pose_noise=_POSE_NOISE,
+        plans=Table(
+            {"noise_free_poses": _COUNT, "few_poses": _COUNT, "many_poses": _COUNT},
+            required=True,
+        ),
+        verification=Table(
+            {
+                "nodes_per_axis": _COUNT,
+                "orientations_per_node": _COUNT,
+                "margin": Key(float, min=0, below=0.5),
+                "stroke_margin_mm": _NONNEG,
+            },
+            required=True,
+        ),
+    ),
+    "liu_vs_ols": _base(
+        **_liu_vs_ols_keys(),
         # the single scenario needs it; the draw study (with [draws]) does without
         monte_carlo=Table({"runs": Key(int, required=True, min=2, max=MAX_COUNT)}),
         # the draw study: the whole scenario over n truth draws (seeds seed, seed + 1, ...)
@@ -487,6 +526,26 @@ SCHEMAS: dict[str, Table] = {
         ),
         # the loop after the fine calibration (diagnosis, effect, refit, compensation)
         loop=Table({"estimator": Key(str)}),
+    ),
+    # liu_vs_ols's plan and twin over a grid of tracker noise and test placements
+    "liu_regime": _base(
+        **_liu_vs_ols_keys(),
+        regime=Table(
+            {
+                "sigmas_mm": Key(list, required=True, item=float, min_items=1, above=0),
+                "placements": Key(
+                    list, required=True, item=str, min_items=1, check=_check_placements
+                ),
+                "draws": Key(int, required=True, min=1, max=MAX_COUNT),
+                "extrapolated_offset_mm": Key(float, above=0),
+                "extrapolated_side": Key(str, choices=("below", "above")),
+                "stroke_margin_mm": _NONNEG,
+                "tilt_deg": Key(list, item=float, length=2, min=0, below=90),
+                "tilt_seed": Key(int, min=0),
+                "engine": Key(str, choices=("ray", "local")),
+            },
+            required=True,
+        ),
     ),
     "optimal_poses": _base(
         seed=_SEED,
@@ -545,20 +604,13 @@ SCHEMAS: dict[str, Table] = {
     "serial_arm": _base(
         seed=_SEED,
         truth=Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
-        tracker=Table(
+        tracker=_ARM_TRACKER,
+        plan=_ARM_PLAN,
+        compensation=Table(
             {
-                "position_mm": Key(list, required=True, item=float, length=3),
-                "rotation_deg": Key(list, required=True, item=float, length=3),
-                "noise": Key(str, required=True, check=_check_noise_spec),
-                "sigma_mm": Key(float, required=True, above=0),
-            },
-            required=True,
-        ),
-        plan=Table(
-            {
-                "calibration_poses": _COUNT,
-                "test_poses": _COUNT,
+                "desired_poses": _COUNT,
                 "joint_fraction": Key(float, required=True, above=0, max=1),
+                "stroke_margin_deg": Key(float, required=True, min=0),
             },
             required=True,
         ),
@@ -574,6 +626,18 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
+    ),
+    "measured_loop": _base(
+        seed=_SEED,
+        truth=Table(
+            {
+                "random": Table(_TRUTH_RANDOM.keys, required=True),
+                "effects": Key(list, check=_check_effects),
+            },
+            required=True,
+        ),
+        tracker=_ARM_TRACKER,
+        plan=_ARM_PLAN,
     ),
     "undeclared_effect": _base(
         seed=_SEED,

@@ -242,7 +242,8 @@ def run_case(
             "first_correct": False,
             "runtime_s": time.perf_counter() - t0,
         }
-    named = diag.chosen
+    # "unexplained" names no effect: the residual exceeds the noise, nothing explains it
+    named = "none" if diag.chosen == "unexplained" else diag.chosen
     out.update(
         named=named,
         reason=diag.reason,
@@ -277,7 +278,7 @@ def _audit(model, result, diag, audit, audit_order, head) -> dict[str, Any]:
     values = result.values
     pred = model.predict(values, audit.commands)
     out: dict[str, Any] = {"audit_rms_before_mm": rms(pred.targets)}
-    if diag.chosen == "none":
+    if diag.chosen in ("none", "unexplained"):  # nothing added
         out["audit_rms_after_mm"] = out["audit_rms_before_mm"]
         return out
     if not diag.coefficients:

@@ -21,7 +21,8 @@ What a study logs, and where:
   drawn as a line or as markers (a curve of one point is always drawn as a marker).
 * ``log_parameters``, ``log_text``, ``log_report``, ``log_verdict``: markdown text views (the
   estimates by name with standard errors, the report's key numbers, the named effect);
-  ``log_bars`` a static bar chart; ``log_loop`` the loop-closing residuals before and after.
+  ``log_bars`` a static bar chart; ``log_image`` a report's figure (a PNG) as an image;
+  ``log_loop`` the loop-closing residuals before and after.
 
 Each call notes what it logged in ``self.logged`` (``recording_blueprints.Logged``). On
 ``close`` the series styles are written, the first pose is copied onto the active timeline
@@ -566,6 +567,14 @@ class Recorder:
         doc = self.rr.TextDocument(viewer_markdown(markdown), media_type=self.rr.MediaType.MARKDOWN)
         self._rec.log(path, doc, static=True)
         self.logged.texts[path] = name or path.replace("_", " ")
+
+    @_active
+    def log_image(self, name: str, png: Path) -> None:
+        """A figure of the report (a PNG written beside the recording) as a static image,
+        ``figures/<name>``, in a 2D view of its own."""
+        path = f"figures/{entity_part(name)}"
+        self._rec.log(path, self.rr.EncodedImage(path=Path(png)), static=True)
+        self.logged.images[path] = name.replace("_", " ")
 
     @_active
     def log_loop(

@@ -2,8 +2,9 @@
 
 One blueprint per recording, assembled when the recorder closes: the machine with the
 targets and error arrows of each pose group (one 3D view per group), one labelled error-map
-view per stage and layer, one plot per family of curves on the active timeline, bar charts,
-and text views (the verdict, the report's key numbers, one parameter table per stage).
+view per stage and layer, a report's figures (one 2D view each), one plot per family of
+curves on the active timeline, bar charts, and text views (the verdict, the report's key
+numbers, one parameter table per stage).
 A view is made only for data that exists; a curve on another timeline than the active one
 is not given a view (rerun plots against the active timeline only), nor is a pose group
 posed on another pose timeline (``build_blueprint(log, timeline=...)`` opens on that one).
@@ -82,6 +83,7 @@ class Logged:
     series: dict[str, Series] = field(default_factory=dict)  # entity path -> curve
     bars: dict[str, str] = field(default_factory=dict)  # entity path -> view name
     texts: dict[str, str] = field(default_factory=dict)  # entity path -> view name
+    images: dict[str, str] = field(default_factory=dict)  # entity path -> view name
 
     def active_timeline(self) -> str | None:
         """The timeline the viewer opens on: the one most curves are plotted against (a
@@ -156,6 +158,16 @@ def error_map_views(rrb: Any, log: Logged) -> Any | None:
     return rows[0] if len(rows) == 1 else rrb.Tabs(*rows)
 
 
+def image_views(rrb: Any, log: Logged) -> Any | None:
+    """A report's figures (heat maps ...), all at once: one 2D view each, in a grid."""
+    views = [
+        rrb.Spatial2DView(origin=p, contents=["$origin"], name=n) for p, n in log.images.items()
+    ]
+    if not views:
+        return None
+    return views[0] if len(views) == 1 else rrb.Grid(*views, name="figures")
+
+
 def series_views(rrb: Any, log: Logged, timeline: str | None) -> list[Any]:
     families: dict[str, list[str]] = {}
     for path, s in log.series.items():
@@ -201,6 +213,10 @@ def build_blueprint(log: Logged, timeline: str | None = None) -> Any:
     if maps is not None:
         left_parts.append(maps)
         left_shares.append(2.0)
+    images = image_views(rrb, log)
+    if images is not None:
+        left_parts.append(images)
+        left_shares.append(3.0)
     right_parts, right_shares = [], []
     for view in series_views(rrb, log, timeline):
         right_parts.append(view)

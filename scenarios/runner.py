@@ -40,9 +40,11 @@ STUDIES = {
         "scenarios.polisher_identifiability_report",
     ),
     "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
+    "liu_regime": ("scenarios.liu_regime", "scenarios.liu_regime_report"),
     "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
     "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
     "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
+    "measured_loop": ("scenarios.measured_loop", "scenarios.measured_loop_report"),
     "diagnosis_benchmark": (
         "scenarios.diagnosis_benchmark",
         "scenarios.diagnosis_benchmark_report",

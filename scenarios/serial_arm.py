@@ -8,8 +8,9 @@ calibration and a test set, then runs the user's commands on it, in process:
     python -m calib identify --model M --errors E --data D --set calibration --out R.json
     python -m calib verify   --model M --errors E --result R.json --data D --set test --out V.json
 
-once with one reflector (positions only) and once with three. The numbers come from the
-files those commands write.
+once with one reflector (positions only) and once with three, then closes the loop through
+``compensate``, ``export`` and ``verify`` of the exported model (scenarios.serial_arm_loop).
+The numbers come from the files those commands write.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from calib.result_file import load_result
 from scenarios.config import Scenario, ScenarioError
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
+from scenarios.serial_arm_loop import close_the_loop
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
@@ -163,7 +165,22 @@ def _variant(
             scale=200.0,
             group=name,
         )
+    progress.step(f"{name}: compensate, re-measure, export, verify the exported model")
+    loop = close_the_loop(
+        scenario,
+        name,
+        model_path,
+        errors_path,
+        data,
+        result_json,
+        truth,
+        calibrated,
+        tracker,
+        out_dir,
+        _cli,
+    )
     return {
+        **loop,
         "n_poses": {"calibration": n_cal, "test": n_test},
         "n_targets": nominal.n_targets,
         "exit_codes": {"identify": code_id, "verify": code_ver},

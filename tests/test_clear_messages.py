@@ -76,7 +76,7 @@ def _edited_result(files: dict[str, Path], name: str, value: object) -> Path:
 @pytest.mark.parametrize(
     ("value", "expected"),
     [
-        (1e6, "values beyond a plausible size: leg2.base.dx = +1000000.0 mm"),
+        (1e6, "values beyond a plausible size: leg2.base.dx = +1000000.0"),
         ("0.3", "parameter 'leg2.base.dx' has no numeric 'value' (got '0.3' (str)"),
     ],
 )

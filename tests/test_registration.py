@@ -146,7 +146,7 @@ def test_prior_keeps_weak_parameters_physical_and_helps_held_out(arm):
                 np.max(np.abs(params.to_display(held.values))),
             )
         )
-        weak = weakly_identified(free.names, free.std_errors, params.is_angle, spec)
+        weak = weakly_identified(free.names, free.std_errors, params, spec)
         assert len(weak) >= 10 and all(w["std"] > 0.5 * w["prior_range"] for w in weak)
         assert np.nanmax(held.std_errors) < 0.5 * np.nanmax(free.std_errors)
     sizes = np.array(sizes)

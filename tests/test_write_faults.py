@@ -154,7 +154,7 @@ def test_a_failed_swap_puts_the_replaced_files_back(tmp_path, monkeypatch):
 @pytest.mark.parametrize(
     ("command", "out", "message"),
     [
-        ("verify", "v.csv", "name the JSON file"),
+        ("verify", "v.csv", "a file written beside it would take its own name"),
         ("identify", "d.csv", "would overwrite the input file"),
         ("verify", "d.csv.json", "would overwrite the input file"),
         ("identify", ".", "is a folder"),

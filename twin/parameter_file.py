@@ -2,7 +2,8 @@
 
 An error-model file lists ``[[parameter]]`` tables (``name``, ``kind``, ``element``, ``axis``);
 a values file holds ``[values]`` by parameter name in millimetres and degrees (the units of
-files), converted to SI here and nowhere else.
+files; an ``actuator_gain``, whose element is an actuator's name and which needs no axis, in
+ppm), converted to SI here and nowhere else.
 """
 
 from __future__ import annotations
@@ -195,7 +196,8 @@ def load_parameter_set(path: str | Path, model: mujoco.MjModel) -> ParameterSet:
 def values_from_display(
     params: ParameterSet, display: dict[str, float], source: str = "values"
 ) -> np.ndarray:
-    """SI vector from a {name: mm-or-deg} mapping; names not given are zero, unknown ones fail."""
+    """SI vector from a {name: mm, deg or ppm} mapping; names not given are zero, unknown ones
+    fail."""
     unknown = sorted(set(display) - set(params.names))
     if unknown:
         raise ParameterError(f"{source}: unknown parameter names {unknown}")
@@ -210,11 +212,13 @@ def values_from_display(
 
 
 def load_values(path: str | Path, params: ParameterSet) -> np.ndarray:
-    """Parameter values (SI) from a ``[values]`` file in mm and deg."""
+    """Parameter values (SI) from a ``[values]`` file in mm, deg and ppm."""
     path = Path(path)
     doc = _read_toml(path)
     if doc.get("unit", "mm") != "mm":
-        raise ParameterError(f"{path}: unit must be 'mm' (angles in deg), got {doc.get('unit')!r}")
+        raise ParameterError(
+            f"{path}: unit must be 'mm' (angles in deg, gains in ppm), got {doc.get('unit')!r}"
+        )
     values = doc.get("values")
     if not isinstance(values, dict):
         raise ParameterError(f"{path} has no [values] table")

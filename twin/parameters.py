@@ -1,18 +1,27 @@
-"""Named geometric parameters of an MJCF model: injection in memory and their screw motions.
+"""Named parameters of an MJCF model: injection in memory and their screw motions.
 
-A parameter is one scalar deviation from the nominal MJCF, of one of four kinds:
+A parameter is one scalar deviation from the nominal MJCF, of one of five kinds:
 
 * ``body_pos``: the body's origin moves by ``value * axis``, axis in the *parent* frame;
 * ``body_rot``: the body frame turns by ``value`` about ``axis`` (parent frame) at its origin;
   several rotations of one body compose as one rotation vector ``w = sum(axis_k v_k)``;
 * ``site_pos``: the site moves by ``value * axis``, axis in its body's frame;
-* ``joint_zero``: an encoder offset, the joint's true value is the commanded one + ``value``.
+* ``joint_zero``: an encoder offset, the joint's true value is the commanded one + ``value``;
+* ``actuator_gain``: a scale error of an actuator (element: the actuator's name), a
+  dimensionless ``g``: the joint takes ``q0 + (c - q0)(1 + g)`` for the command ``c``, ``q0``
+  the joint's zero (its ``qpos0``). Files show it in ppm.
 
-Values are SI (metres, radians). Injection edits ``body_pos``, ``body_quat``, ``site_pos``,
-``qpos0`` of a copy of the nominal model and calls ``mj_setConst`` (without it, sites compiled
-at a body origin ignore later edits). Each parameter also has a *screw* at the current
-configuration: a world translation ``t``, a world rotation ``w`` about point ``o``, so that a
-point ``p`` carried by it moves by ``t + w x (p - o)`` and its frame turns by ``w``.
+The first four are geometry; a gain acts on the commands, not on the model: injection leaves
+it out, its screw is zero and it moves no site at a given configuration (its identification
+columns come from the calibration model, which maps commands to joint values through it).
+The Jacobians of twin.sensitivity and twin.sensitivity_batch refuse it.
+
+Values are SI (metres, radians, gains as plain numbers). Injection edits ``body_pos``,
+``body_quat``, ``site_pos``, ``qpos0`` of a copy of the nominal model and calls
+``mj_setConst`` (without it, sites compiled at a body origin ignore later edits). Each
+parameter also has a *screw* at the current configuration: a world translation ``t``, a world
+rotation ``w`` about point ``o``, so that a point ``p`` carried by it moves by
+``t + w x (p - o)`` and its frame turns by ``w``.
 """
 
 from __future__ import annotations
@@ -29,7 +38,8 @@ import numpy as np
 from twin.exceptions import ParameterError
 from twin.rotations import quat_from_rotvec, quat_multiply, skew
 
-KINDS = ("body_pos", "body_rot", "site_pos", "joint_zero")
+KINDS = ("body_pos", "body_rot", "site_pos", "joint_zero", "actuator_gain")
+GAIN = KINDS.index("actuator_gain")
 SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 
@@ -73,7 +83,7 @@ class Parameter:
             for x in axis
         ):
             raise ParameterError(f"parameter '{self.name}': axis {self.axis!r} must be 3 numbers")
-        if self.kind != "joint_zero":
+        if self.kind not in ("joint_zero", "actuator_gain"):
             n = float(np.linalg.norm(self.axis))
             if not np.isclose(n, 1.0, atol=1e-9):
                 raise ParameterError(
@@ -95,23 +105,16 @@ class ParameterSet:
         self.kind = np.array([KINDS.index(p.kind) for p in self.parameters], dtype=int)
         self.axis = np.array([p.axis for p in self.parameters], dtype=float).reshape(n, 3)
         self.element = np.zeros(n, dtype=int)
-        self.body = np.zeros(n, dtype=int)  # body whose subtree the parameter moves
+        # body whose subtree the parameter moves (a gain: its joint's body; it moves none)
+        self.body = np.zeros(n, dtype=int)
         self.is_angle = np.zeros(n, dtype=bool)
-        obj = {
-            "body_pos": mujoco.mjtObj.mjOBJ_BODY,
-            "body_rot": mujoco.mjtObj.mjOBJ_BODY,
-            "site_pos": mujoco.mjtObj.mjOBJ_SITE,
-            "joint_zero": mujoco.mjtObj.mjOBJ_JOINT,
-        }
+        self.is_gain = self.kind == GAIN
         for k, p in enumerate(self.parameters):
-            i = mujoco.mj_name2id(model, obj[p.kind], p.element)
-            if i < 0:
-                raise ParameterError(
-                    f"parameter '{p.name}': the model has no {obj[p.kind].name[6:].lower()} "
-                    f"named '{p.element}'"
-                )
+            i = _element_id(model, p)
             self.element[k] = i
-            if p.kind == "site_pos":
+            if p.kind == "actuator_gain":
+                self.body[k] = model.jnt_bodyid[_actuated_joint(model, p, i)]
+            elif p.kind == "site_pos":
                 self.body[k] = model.site_bodyid[i]
             elif p.kind == "joint_zero":
                 jt = int(model.jnt_type[i])
@@ -136,7 +139,7 @@ class ParameterSet:
                     break
                 a = parent[a]
             for k in range(n):
-                self.subtree[k, b] = self.body[k] in chain
+                self.subtree[k, b] = self.body[k] in chain and not self.is_gain[k]
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
         self._index_kinds()
         self._local = threading.local()
@@ -154,7 +157,9 @@ class ParameterSet:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        if "_of_kind" not in state:  # pickled before the kinds were indexed
+        if "is_gain" not in state:  # pickled before the gain kind
+            self.is_gain = self.kind == GAIN
+        if len(state.get("_of_kind", ())) != len(KINDS):  # pickled before the kinds were indexed
             self._index_kinds()
         self._local = threading.local()
 
@@ -167,18 +172,36 @@ class ParameterSet:
         except ValueError:
             raise ParameterError(f"unknown parameter '{name}'") from None
 
+    @property
+    def has_gains(self) -> bool:
+        """Whether any parameter is an actuator gain (not geometry)."""
+        return bool(np.any(self.is_gain))
+
     def units(self) -> list[str]:
-        return ["rad" if a else "m" for a in self.is_angle]
+        """SI unit of each parameter: "m", "rad", or "1" for a (dimensionless) gain."""
+        return [
+            "1" if g else "rad" if a else "m"
+            for a, g in zip(self.is_angle, self.is_gain, strict=True)
+        ]
+
+    def display_units(self) -> list[str]:
+        """Unit of each parameter in files, results and printouts: "mm", "deg" or "ppm"."""
+        return [
+            "ppm" if g else "deg" if a else "mm"
+            for a, g in zip(self.is_angle, self.is_gain, strict=True)
+        ]
 
     def to_display(self, values: np.ndarray) -> np.ndarray:
-        """SI -> millimetres and degrees, per parameter."""
+        """SI -> millimetres, degrees and ppm, per parameter."""
         v = np.asarray(values, dtype=float)
-        return np.where(self.is_angle, np.degrees(v), v * 1e3)
+        shown = np.where(self.is_angle, np.degrees(v), v * 1e3)
+        return np.where(self.is_gain, v * 1e6, shown) if self.has_gains else shown
 
     def from_display(self, values: Iterable[float]) -> np.ndarray:
-        """Millimetres and degrees -> SI, per parameter."""
+        """Millimetres, degrees and ppm -> SI, per parameter."""
         v = np.asarray(list(values), dtype=float)
-        return np.where(self.is_angle, np.radians(v), v * 1e-3)
+        si = np.where(self.is_angle, np.radians(v), v * 1e-3)
+        return np.where(self.is_gain, v * 1e-6, si) if self.has_gains else si
 
     # ----------------------------------------------------------------- injection
     def rotation_vectors(self, values: np.ndarray) -> dict[int, np.ndarray]:
@@ -204,7 +227,7 @@ class ParameterSet:
         model = copy.deepcopy(nominal)
         # several parameters of one element add up in parameter order (np.add.at is
         # unbuffered and sequential: the same sums as one parameter after the other)
-        k0, _, k2, k3 = self._of_kind
+        k0, k2, k3 = (self._of_kind[KINDS.index(k)] for k in ("body_pos", "site_pos", "joint_zero"))
         np.add.at(model.body_pos, self.element[k0], self.axis[k0] * values[k0, None])
         np.add.at(model.site_pos, self.element[k2], self.axis[k2] * values[k2, None])
         np.add.at(model.qpos0, model.jnt_qposadr[self.element[k3]], -values[k3])
@@ -249,6 +272,8 @@ class ParameterSet:
                 o[k] = data.xpos[par] + xmat[par] @ model.body_pos[i]
             elif kind == 2:
                 t[k] = xmat[model.site_bodyid[i]] @ self.axis[k]
+            elif kind == GAIN:  # no motion at a given configuration
+                continue
             elif self.is_angle[k]:
                 w[k] = data.xaxis[i]
                 o[k] = data.xanchor[i]
@@ -319,6 +344,55 @@ class ParameterSet:
         dp *= affected[:, :, None]
         dw = w[None, :, :] * affected[:, :, None]
         return dp.transpose(0, 2, 1), dw.transpose(0, 2, 1)
+
+
+def _names(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int) -> list[str]:
+    return [n for n in (mujoco.mj_id2name(model, obj, i) for i in range(count)) if n]
+
+
+def _element_id(model: mujoco.MjModel, p: Parameter) -> int:
+    """The id of ``p``'s element; a clear error (with the closest name) if there is none."""
+    obj, count = {
+        "body_pos": (mujoco.mjtObj.mjOBJ_BODY, model.nbody),
+        "body_rot": (mujoco.mjtObj.mjOBJ_BODY, model.nbody),
+        "site_pos": (mujoco.mjtObj.mjOBJ_SITE, model.nsite),
+        "joint_zero": (mujoco.mjtObj.mjOBJ_JOINT, model.njnt),
+        "actuator_gain": (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu),
+    }[p.kind]
+    i = mujoco.mj_name2id(model, obj, p.element)
+    if i < 0:
+        what = obj.name[6:].lower()
+        near = difflib.get_close_matches(p.element, _names(model, obj, count), n=1)
+        hint = f" (did you mean '{near[0]}'?)" if near else ""
+        raise ParameterError(
+            f"parameter '{p.name}': the model has no {what} named '{p.element}'{hint}"
+        )
+    return int(i)
+
+
+def _actuated_joint(model: mujoco.MjModel, p: Parameter, actuator: int) -> int:
+    """The slide or hinge joint that actuator ``actuator`` drives (a gain scales its travel)."""
+    j = int(model.actuator_trnid[actuator, 0])
+    if int(model.actuator_trntype[actuator]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(
+        model.jnt_type[j]
+    ) not in (HINGE, SLIDE):
+        raise ParameterError(
+            f"parameter '{p.name}': actuator '{p.element}' does not drive a slide or hinge "
+            "joint, so it has no gain"
+        )
+    return j
+
+
+def require_geometry(params: ParameterSet, what: str) -> None:
+    """Raise ParameterError if ``params`` holds actuator gains: ``what`` (a Jacobian of the
+    geometry at given joint values) has no column for them; the calibration model adds them
+    (it maps commands to joint values through the gains)."""
+    if params.has_gains:
+        names = [params.names[k] for k in np.flatnonzero(params.is_gain)]
+        raise ParameterError(
+            f"{what} takes geometric parameters only; {names[:3]} are actuator gains, which "
+            "act through the commands (calib.model.CalibrationModel adds their columns)"
+        )
 
 
 def left_jacobian_so3(w: np.ndarray) -> np.ndarray:

@@ -23,13 +23,14 @@ from twin.closure import (
     update_kinematics,
 )
 from twin.mechanism import Mechanism
-from twin.parameters import ParameterSet
+from twin.parameters import ParameterSet, require_geometry
 
 
 def _implicit(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, sites: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """dq_free/dpi and the explicit site derivatives (dp, dw) of ``sites``, at ``qpos``."""
+    require_geometry(params, "the identification Jacobian (twin.sensitivity)")
     update_kinematics(mech, qpos)
     a, b = closure_sites(mech)
     all_sites = np.concatenate([a, b, sites])

@@ -30,7 +30,7 @@ from twin.kinematics_fast import (
 from twin.kinematics_reduced import ClosureStructure, cross_soa
 from twin.kinematics_tree import TreeFrames, dofs_moving_sites, tree_frames
 from twin.mechanism import Mechanism
-from twin.parameters import ParameterSet
+from twin.parameters import ParameterSet, require_geometry
 from twin.sensitivity_compiled import jacobian_compiled
 
 COMPILED = True  # the compiled kernel (twin.sensitivity_compiled) where it covers the machine
@@ -233,6 +233,7 @@ def _batched(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, out: Outputs
 ) -> np.ndarray:
     """:func:`_chunk` over ``qpos`` (N, nq) in chunks of CHUNK poses: (N, O*rows, n)."""
+    require_geometry(params, "the identification Jacobian (twin.sensitivity_batch)")
     qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
     if not len(qpos):
         return np.zeros((0, len(out.sites) * out.rows, len(params)))

@@ -1,0 +1,119 @@
+"""Which member of an exactly redundant group to fix, and who its true partners are.
+
+When the readings cannot separate some parameters (one reflector on a 6R arm: joint 6's zero
+and the reflector's offset in the plane normal to joint 6; two parallel joints' offsets along
+their axes; the base joints of a platform and the tracker registration), the data fix only
+their combination and any one member may be held at zero. Which one matters to a user: the
+estimates of the others absorb it. A pivoted QR chooses by column norms, blind to the data,
+and can keep a joint zero that must then turn by tens of degrees to play a reflector's offset.
+
+Here the choice is made on the data: the minimum-norm solution of the linearised problem
+(parameters measured in their physical ranges, ``1 mm`` and ``0.1 deg`` by default) plus any
+null-space motion is an exact fit, and fixing a set F of members means moving along the null
+space until those members are zero. F is chosen greedily, one member per null dimension, so
+that the move, and so the estimates, stay smallest. The partners of a fixed member are the
+parameters of the null direction that carries it (the combination the data cannot tell from
+it); whether the registration takes part is read from the unprojected Jacobian.
+
+Every quantity used is independent of the null-space basis the SVD returns, and ties (within
+``TIE``, relative) fix the later parameter in declared order, so the choice is the same on
+every platform.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+TIE = 1e-6
+MEMBER_RTOL = 1e-6  # a null-space component below this fraction of the largest is no member
+REGISTRATION_RTOL = 1e-6  # a null direction moving the readings by more: registration takes part
+
+
+@dataclass(frozen=True)
+class Redundancy:
+    fixed: tuple[int, ...]  # parameter indices held at their start values, ascending
+    partners: dict[int, tuple[int, ...]]  # fixed index -> its partners, strongest first
+    with_registration: dict[int, bool]  # fixed index -> the registration takes part
+
+
+def null_basis(a_u: np.ndarray, n_null: int) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal null basis (n, d) of ``a_u`` (its ``n_null`` weakest right singular
+    vectors) and the minimum-norm solution operator's pieces (V1, S1) of the rest."""
+    _, s, vt = np.linalg.svd(a_u, full_matrices=True)  # every right vector, also for m < n
+    n = a_u.shape[1]
+    keep = n - n_null
+    return vt[keep:].T, (vt[:keep].T, s[:keep])
+
+
+def _shift(v0: np.ndarray, u: np.ndarray, fixed: list[int]) -> float:
+    """Size of the smallest null-space move that zeroes ``u`` at ``fixed``."""
+    c = np.linalg.lstsq(v0[fixed], u[fixed], rcond=None)[0]
+    return float(np.linalg.norm(v0 @ c))
+
+
+def choose_fixed(
+    jac: np.ndarray,
+    residual: np.ndarray,
+    ranges: np.ndarray,
+    n_null: int,
+    zero: np.ndarray,
+    unprojected: np.ndarray | None = None,
+) -> Redundancy:
+    """The members to fix (one per null dimension) for the linearised problem
+    ``jac @ dx = residual`` (m, n), each parameter measured in its physical range
+    ``ranges`` (n,); ``zero`` marks columns with no effect (always fixed). ``unprojected``:
+    the Jacobian before the registration was projected out of ``jac`` (tracker frame)."""
+    n = jac.shape[1]
+    if n_null <= 0:
+        return Redundancy((), {}, {})
+    a_u = jac * ranges
+    a_u[:, zero] = 0.0
+    v0, (v1, s1) = null_basis(a_u, n_null)
+    u = v1 @ ((a_u @ v1).T @ residual / s1**2)  # minimum-norm solution, range units
+    # the columns' own scale must not decide: members are read from the null vectors
+    norms = np.linalg.norm(v0, axis=1)
+    member = norms > MEMBER_RTOL * norms.max()
+    fixed: list[int] = [int(j) for j in np.flatnonzero(zero)]
+    while len(fixed) < n_null:
+        best, best_cost = -1, np.inf
+        basis = v0[fixed] if fixed else np.zeros((0, v0.shape[1]))
+        for j in range(n):
+            if j in fixed or not member[j]:
+                continue
+            row = v0[j]
+            if len(basis):
+                row = row - basis.T @ np.linalg.lstsq(basis.T, row, rcond=None)[0]
+            if np.linalg.norm(row) <= MEMBER_RTOL * norms[j]:
+                continue  # fixing it would not remove a new null dimension
+            cost = _shift(v0, u, [*fixed, j])
+            if cost <= best_cost * (1 + TIE) + 1e-300:
+                best, best_cost = j, min(cost, best_cost)  # ties: the later one is fixed
+        if best < 0:
+            break
+        fixed.append(best)
+    fixed_arr = np.array(sorted(fixed), dtype=int)
+    partners: dict[int, tuple[int, ...]] = {}
+    with_reg: dict[int, bool] = {}
+    for j in fixed_arr:
+        if zero[j]:
+            partners[int(j)], with_reg[int(j)] = (), False
+            continue
+        e = np.zeros(len(fixed_arr))
+        e[np.searchsorted(fixed_arr, j)] = 1.0
+        direction = v0 @ np.linalg.lstsq(v0[fixed_arr], e, rcond=None)[0]
+        size = np.abs(direction)
+        others = [
+            int(i)
+            for i in np.argsort(-size, kind="stable")
+            if i != j and i not in fixed_arr and size[i] > MEMBER_RTOL * size.max()
+        ]
+        partners[int(j)] = tuple(others)
+        moved = 0.0
+        if unprojected is not None:
+            step = direction * ranges
+            moved = float(np.linalg.norm(unprojected @ step))
+            moved /= max(float(np.linalg.norm(unprojected[:, j] * ranges[j])), 1e-300)
+        with_reg[int(j)] = moved > REGISTRATION_RTOL
+    return Redundancy(tuple(int(j) for j in fixed_arr), partners, with_reg)

@@ -1,0 +1,357 @@
+"""The loop on data with real characteristics, through the command line a user types.
+
+Twin-made files (tests/real_like_cases.py) with what real machines hand the calibration: a
+6R arm with one reflector and few poses, a Stewart platform seen through one point whose
+base joints share the registration's motion, a cobot whose joints wind up under a payload
+with an honest tracker accuracy. Each must get a result (exit 0), a physical answer without
+flags, held-out errors no worse than plain least squares, and a diagnosis that runs.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import real_like_cases as cases
+
+from calib.__main__ import main
+from calib.dataset import read_dataset
+from calib.dataset_select import select_set
+from calib.diagnosis_context import reflector_span
+from calib.identify import bind_dataset, model_from_files
+from calib.regularisation import TIE
+from calib.verdict import EXIT_OK, EXIT_POOR_FIT
+from calib.verify import verify
+from calib.workflow import calibrate
+
+
+def _cli(capsys, *args: str) -> tuple[int, str]:
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return code, out.out + out.err
+
+
+def _files(case: cases.Case) -> list[str]:
+    return ["--model", str(case.model), "--errors", str(case.errors), "--data", str(case.data)]
+
+
+def _held_out_plain(case: cases.Case) -> tuple[float, float]:
+    """Test-set 3D RMS and max of plain least squares (every identifiable parameter)."""
+    model = model_from_files(str(case.model), str(case.errors))
+    ds = read_dataset(case.data)
+    run = calibrate(model, ds, "calibration", regularise=False)
+    test, _ = select_set(ds, "test", "verification")
+    obs = bind_dataset(model.nominal, test)
+    v = verify(
+        model,
+        run.result.values,
+        obs.commands,
+        obs.measured,
+        test.pose_ids,
+        registration_after=run.result.registration,
+        calibration_set=(run.obs.commands, run.obs.measured),
+    )
+    return v.after.position.rms_mm, v.after.position.max_mm
+
+
+def _identify_verify(capsys, case: cases.Case, tmp: Path) -> tuple[dict, dict, str]:
+    result, verified = tmp / "r.json", tmp / "v.json"
+    code, text = _cli(capsys, "identify", *_files(case), "--set", "calibration", "--out", result)
+    assert code == EXIT_OK, text
+    code, vtext = _cli(
+        capsys,
+        "verify",
+        *_files(case),
+        "--result",
+        result,
+        "--set",
+        "test",
+        "--out",
+        verified,
+    )
+    assert code == EXIT_OK, vtext
+    return json.loads(result.read_text()), json.loads(verified.read_text()), text
+
+
+@pytest.fixture(scope="module")
+def few(tmp_path_factory):
+    return cases.few_pose_arm(tmp_path_factory.mktemp("few"))
+
+
+@pytest.fixture(scope="module")
+def stewart(tmp_path_factory):
+    return cases.stewart_one_point(tmp_path_factory.mktemp("stewart"))
+
+
+@pytest.fixture(scope="module")
+def cobot(tmp_path_factory):
+    return cases.cobot(tmp_path_factory.mktemp("cobot"))
+
+
+def test_few_pose_single_reflector_arm_gets_a_physical_answer(few, capsys, tmp_path):
+    result, verified, text = _identify_verify(capsys, few, tmp_path)
+    theta = result["parameters"]["link6.theta"]
+    # one reflector: joint 6's zero and the reflector's offset in the plane normal to joint 6
+    # are one direction; the member fixed is the one that keeps the estimates small, and the
+    # reason names its true partner (the reflector's offset), not the registration
+    assert theta["status"] == "fixed"
+    assert "target_1.dy" in theta["reason"]
+    assert "one reflector cannot separate a rotation of joint A6" in theta["reason"]
+    assert result["parameters"]["target_1.dy"]["status"] == "estimated"
+    assert "target_1.dx" not in result["redundant_with_registration"]
+    shown = [p["value"] for p in result["parameters"].values()]
+    assert max(abs(v) for v in shown) < 2.0  # mm and deg: a built arm's errors
+    reg = result["regularisation"]
+    assert reg["directions_kept_at_zero"] >= 1 and "regularised" in reg["text"]
+    assert "regularised" in text  # the output says what was regularised
+    plain_rms, _ = _held_out_plain(few)
+    assert verified["after"]["rms_mm"] <= plain_rms * (1 + TIE)
+    assert verified["after"]["rms_mm"] < 0.8 * verified["before"]["rms_mm"]
+
+
+def test_stewart_platform_seen_through_one_point(stewart, capsys, tmp_path):
+    result, verified, _ = _identify_verify(capsys, stewart, tmp_path)
+    reasons = [p.get("reason", "") for p in result["parameters"].values()]
+    # the base joints share the registration's rigid motion: six of them are fixed, each
+    # with its partners and the registration named
+    shared = [r for r in reasons if "base" in r and "tracker registration" in r]
+    assert len(shared) >= 1
+    values = [abs(p["value"]) for p in result["parameters"].values()]
+    assert max(values) < 20.0  # no 30-90 mm along weak directions
+    assert result["regularisation"]["directions_kept_at_zero"] >= 1
+    # plain least squares creeps along the weak valley without converging (exit 3); what it
+    # reaches predicts the 36 test poses as well as the default does, within their sampling
+    # noise (the cross-validation that chose the default saw 8 % less error than plain)
+    plain_rms, _ = _held_out_plain(stewart)
+    assert verified["after"]["rms_mm"] <= plain_rms * 1.01
+    assert verified["after"]["rms_mm"] < 0.6 * verified["before"]["rms_mm"]
+
+
+def test_cobot_with_an_honest_tracker_accuracy_runs_the_loop(cobot, capsys, tmp_path):
+    result, verified, text = _identify_verify(capsys, cobot, tmp_path)
+    ratio = result["verdict"]["residual_to_noise"]
+    assert 10.0 < ratio < 20.0, ratio  # the normal case on a real machine: said, not refused
+    assert result["verdict"]["status"] == "ok"
+    assert "more than the tracker noise" in text and "calib diagnose" in text
+    assert verified["after"]["rms_mm"] < 0.6 * verified["before"]["rms_mm"]
+    out = tmp_path / "d.json"
+    code, dtext = _cli(capsys, "diagnose", *_files(cobot), "--test-set", "test", "--out", out)
+    assert code == EXIT_OK, dtext
+    d = json.loads(out.read_text())
+    assert "set 'test'" in dtext
+    before, after = d["test"]["before"], d["test"]["after"]
+    assert after["rms_mm"] <= before["rms_mm"] and after["max_mm"] <= before["max_mm"]
+    assert before["rms_mm"] == pytest.approx(verified["after"]["rms_mm"], rel=1e-6)
+    # the joints wind up under the payload: the compliance candidate explains it (its fit
+    # beside the geometry and the registration's rigid motion) down to the tracker noise
+    assert d["diagnosed_effect"] == "gravity_compliance"
+    assert after["rms_mm"] < 2.0 * np.sqrt(3) * 0.01 < 0.1 * before["rms_mm"]
+    assert "gravity load" in d["effect"]["not_static_reasons"]["gravity_compliance"]
+
+
+def test_verify_of_a_refused_result_says_so(cobot, capsys, tmp_path):
+    result = tmp_path / "r.json"
+    code, _ = _cli(capsys, "identify", *_files(cobot), "--max-ratio", "3", "--out", result)
+    assert code == EXIT_POOR_FIT
+    code, text = _cli(capsys, "verify", *_files(cobot), "--result", result, "--set", "test")
+    assert code == EXIT_POOR_FIT
+    assert "REFUSED RESULT" in text and "limit 3 times" in text
+
+
+def test_diagnose_holds_out_the_rows_it_is_told(few, capsys, tmp_path):
+    args = ["diagnose", *_files(few), "--sigma-mm", "0.02"]
+    code, text = _cli(capsys, *args, "--test", few.data)  # the same file: its 'test' rows
+    assert code == EXIT_OK, text
+    assert "10 of 30 poses (set 'test') used for the diagnosis's test" in text
+    code, text = _cli(capsys, *args, "--test-set", "calibration")
+    assert code == 2 and "also fitted" in text
+    code, text = _cli(capsys, *args)
+    assert "--test-set test holds them out" in text
+
+
+def test_diagnose_names_nothing_on_noise(capsys, tmp_path):
+    case = cases.arm_case(
+        tmp_path,
+        seed=8,
+        n_cal=120,
+        n_test=40,
+        three_reflectors=True,
+        noise="gaussian 20 um",
+        effects=False,
+        name="noise_only",
+    )
+    out = tmp_path / "d.json"
+    code, text = _cli(capsys, "diagnose", *_files(case), "--test-set", "test", "--out", out)
+    assert code == EXIT_OK, text
+    d = json.loads(out.read_text())
+    assert d["chi2_p_value"] > 0.01
+    assert d["diagnosed_effect"] == "none", text
+    assert d["effect"]["added_parameters"] == []
+    t = d["test"]
+    assert t["after"] == t["before"]
+    code, text = _cli(capsys, "identify", *_files(case), "--with", out)
+    assert code == 2 and "there is nothing to add" in text
+
+
+def test_identify_leaves_full_rank_fits_alone(capsys, tmp_path):
+    """Where no direction is weak (three reflectors, many poses) the default is plain least
+    squares to the last digit."""
+    case = cases.arm_case(
+        tmp_path,
+        seed=9,
+        n_cal=60,
+        n_test=10,
+        three_reflectors=True,
+        effects=False,
+        name="full_rank",
+    )
+    model = model_from_files(str(case.model), str(case.errors))
+    ds = read_dataset(case.data)
+    default = calibrate(model, ds, "calibration")
+    plain = calibrate(model, ds, "calibration", regularise=False)
+    assert default.result.subspace is not None and default.result.subspace.basis is None
+    np.testing.assert_array_equal(default.result.values, plain.result.values)
+
+
+def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
+    """One leg's revolution-to-mm factor 3 % off: diagnose names the gain, writes it as error
+    model parameters, identify --with fits geometry and gains together, verify scores it."""
+    diag = tmp_path / "d.json"
+    code, text = _cli(capsys, "diagnose", *_files(stewart), "--test-set", "test", "--out", diag)
+    assert code == EXIT_OK, text
+    d = json.loads(diag.read_text())
+    assert d["diagnosed_effect"] == "gain_error"
+    added = d["effect"]["added_parameters"]
+    assert [a["kind"] for a in added] == ["actuator_gain"] * 6
+    result, verified = tmp_path / "rw.json", tmp_path / "vw.json"
+    code, text = _cli(
+        capsys,
+        "identify",
+        *_files(stewart),
+        "--set",
+        "calibration",
+        "--with",
+        diag,
+        "--out",
+        result,
+    )
+    assert code == EXIT_OK, text
+    r = json.loads(result.read_text())
+    gain = r["parameters"]["leg2.gain"]
+    assert gain["unit"] == "ppm" and abs(gain["value"] - 3e4) < 3 * gain["std"]
+    assert r["added_parameters"] == added and r["with"] == str(diag)
+    code, text = _cli(
+        capsys,
+        "verify",
+        *_files(stewart),
+        "--result",
+        result,
+        "--set",
+        "test",
+        "--out",
+        verified,
+    )
+    assert code == EXIT_OK, text
+    after = json.loads(verified.read_text())["after"]
+    geometric = d["test"]["before"]
+    assert after["rms_mm"] < 0.9 * geometric["rms_mm"]
+    assert after["max_mm"] < geometric["max_mm"]
+
+
+@pytest.mark.accuracy
+def test_default_never_worse_than_plain_on_the_polisher(tmp_path):
+    """The polisher's 150-parameter error model on random poses: 51 identifiable, some of
+    them weakly; keeping the weakest directions at zero must not cost held-out accuracy."""
+    from calib.dataset import Dataset
+    from calib.model import CalibrationModel
+    from twin.measurement import measure
+    from twin.mechanism import Mechanism
+    from twin.parameter_file import load_parameter_set
+    from twin.tracker import Tracker, TrackerNoise
+    from twin.workspace import random_poses
+
+    root = Path(__file__).resolve().parent.parent / "models"
+    mech = Mechanism.from_xml(root / "polisher.xml")
+    params = load_parameter_set(root / "polisher.params.toml", mech.model)
+    rng = np.random.default_rng(1)
+    shown = np.where(
+        params.is_angle, rng.uniform(-0.03, 0.03, len(params)), rng.uniform(-0.1, 0.1, len(params))
+    )
+    truth = mech.with_model(params.inject(mech.model, params.from_display(shown)))
+    _, commands = random_poses(mech, 138, rng)
+    tracker = Tracker(position_m=(2.0, 0.5, 0.5), noise=TrackerNoise.from_spec("gaussian 5 um"))
+    readings = measure(truth, commands, tracker, rng).readings
+    ds = Dataset(
+        model=mech.name,
+        frame="base",
+        actuator_names=mech.actuator_names,
+        actuator_units=tuple("mm" if s else "deg" for s in mech.actuator_is_slide),
+        target_names=mech.target_names,
+        pose_ids=np.arange(1, 139),
+        sets=np.array(["calibration"] * 98 + ["test"] * 40),
+        commands=commands,
+        readings=readings,
+        tracker={"sigma_mm": 0.005},
+    )
+    model = CalibrationModel(mech, params)
+    test, _ = select_set(ds, "test", "verification")
+    obs = bind_dataset(mech, test)
+    after = {}
+    for regularise in (True, False):
+        run = calibrate(model, ds, "calibration", regularise=regularise)
+        assert run.verdict.ok
+        v = verify(model, run.result.values, obs.commands, obs.measured, test.pose_ids)
+        after[regularise] = v.after.position
+    assert after[True].rms_mm <= after[False].rms_mm * (1 + TIE)
+    assert after[True].max_mm <= after[False].max_mm * (1 + TIE)
+
+
+def test_hexapod_with_offset_reflectors_is_diagnosed_and_refitted(capsys, tmp_path):
+    """Reflectors 30-120 um off their nests, which the error model does not hold: geometry
+    leaves several times the noise; diagnose runs (no refusal), names the offsets, and the
+    refit with them reaches the noise on held-out poses."""
+    case = cases.hexapod_reflectors(tmp_path)
+    result, verified, text = _identify_verify(capsys, case, tmp_path)
+    assert result["verdict"]["residual_to_noise"] > 4.0 and result["verdict"]["status"] == "ok"
+    diag = tmp_path / "d.json"
+    code, text = _cli(capsys, "diagnose", *_files(case), "--test-set", "test", "--out", diag)
+    assert code == EXIT_OK, text
+    d = json.loads(diag.read_text())
+    assert d["diagnosed_effect"] == "reflector_offsets"
+    assert {a["kind"] for a in d["effect"]["added_parameters"]} == {"site_pos"}
+    # the offsets are what the data fix: the reflectors relative to each other, a common
+    # rigid motion of the three taken by the platform's own errors; the truth seen the same
+    # way agrees within three standard errors
+    fitted = d["effect_parameters"]["reflector_offsets"]
+    assert "up to a rigid motion of the reflector set" in fitted["note"]["value"]
+    model = model_from_files(str(case.model), str(case.errors))
+    span = reflector_span(model)["reflector_offsets"]
+    truth = case.truth["reflector_offsets_m"].reshape(-1)
+    truth = (truth - span @ np.linalg.pinv(span) @ truth) * 1e3
+    names = [a["name"] for a in d["effect"]["added_parameters"]]
+    for name, t in zip(names, truth, strict=True):
+        got = fitted[name]
+        assert abs(got["value"] - t) < 3 * got["std"] + 1e-9, (name, got, t)
+    with_effect, v2 = tmp_path / "rw.json", tmp_path / "vw.json"
+    code, text = _cli(
+        capsys,
+        "identify",
+        *_files(case),
+        "--set",
+        "calibration",
+        "--with",
+        diag,
+        "--out",
+        with_effect,
+    )
+    assert code == EXIT_OK and "consistent with the tracker noise" in text, text
+    code, text = _cli(
+        capsys, "verify", *_files(case), "--result", with_effect, "--set", "test", "--out", v2
+    )
+    assert code == EXIT_OK, text
+    after = json.loads(v2.read_text())["after"]
+    noise_3d = np.sqrt(3) * case.sigma_mm
+    assert after["rms_mm"] < 1.2 * noise_3d < 0.3 * verified["after"]["rms_mm"]
+    assert after["max_mm"] < verified["after"]["max_mm"]
