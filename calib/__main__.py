@@ -344,13 +344,21 @@ def check_out(args: argparse.Namespace) -> None:
         )
     if out.is_dir():
         raise ValueError(f"--out {out} is a folder; name the file to write")
-    inputs = [getattr(args, k, None) for k in ("model", "errors", "data", "result", "test")]
-    inputs += [getattr(args, "poses", None)]
-    inputs += [str(sidecar_path(p)) for p in inputs[2:] if p and str(p).endswith(".csv")]
+    roles = {
+        "model": "the nominal model itself",
+        "errors": "the error model",
+        "data": "the dataset",
+        "result": "the result file",
+        "test": "the test dataset",
+        "poses": "the desired poses",
+    }
+    inputs = {getattr(args, k, None): role for k, role in roles.items()}
+    for path in [p for p in inputs if p and str(p).endswith(".csv")]:
+        inputs[str(sidecar_path(path))] = f"the sidecar of {path}"
     for o in outs:
-        for i in inputs:
+        for i, role in inputs.items():
             if i and o.exists() and Path(i).exists() and os.path.samefile(o, i):
-                raise ValueError(f"--out would overwrite the input file {i}")
+                raise ValueError(f"--out {o} would overwrite an input file: {role} ({i})")
 
 
 def main(argv: list[str] | None = None) -> int:

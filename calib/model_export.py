@@ -204,6 +204,7 @@ def export_model(
     dh_text = None if dh_out is None else calibrated_dh_text(machine, model_path)
     written = calibrated_mjcf(machine, model_path, out.parent)
     probes = probe_commands(machine.nominal) if commands is None else np.asarray(commands)
+    out.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".xml")
     os.close(fd)
     tmp = Path(name)  # beside the output, so that relative mesh paths resolve

@@ -155,8 +155,8 @@ def test_a_failed_swap_puts_the_replaced_files_back(tmp_path, monkeypatch):
     ("command", "out", "message"),
     [
         ("verify", "v.csv", "a file written beside it would take its own name"),
-        ("identify", "d.csv", "would overwrite the input file"),
-        ("verify", "d.csv.json", "would overwrite the input file"),
+        ("identify", "d.csv", "would overwrite an input file"),
+        ("verify", "d.csv.json", "would overwrite an input file"),
         ("identify", ".", "is a folder"),
     ],
 )
@@ -222,3 +222,22 @@ def test_dh_table_on_a_full_disk_writes_neither_file(tmp_path, monkeypatch, caps
     err = capsys.readouterr().err
     assert "No space left on device; none of arm.xml, arm.params.toml was written" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_verify_as_is_on_a_full_disk_writes_neither_file(files, tmp_path, monkeypatch, capsys):
+    """``verify`` without ``--result`` (a model as it is) writes v.json and v.csv together."""
+    old = {n: f"previous {n}\n".encode() for n in ("v.json", "v.csv")}
+    for name, data in old.items():
+        (tmp_path / name).write_bytes(data)
+    real = write_set_module._temporary
+
+    def temporary(target: Path) -> Path:
+        if target.name == "v.csv":
+            raise os_error(ENOSPC, target)
+        return real(target)
+
+    monkeypatch.setattr(write_set_module, "_temporary", temporary)
+    argv = ["verify", "--model", str(MODEL), "--data", str(files["data"])]
+    assert main([*argv, "--out", str(tmp_path / "v.json")]) == 2
+    assert "none of v.json, v.csv was written" in capsys.readouterr().err
+    assert _contents(tmp_path) == old
