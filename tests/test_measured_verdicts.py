@@ -258,6 +258,18 @@ def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
     geometric = d["test"]["before"]
     assert after["rms_mm"] < 0.9 * geometric["rms_mm"]
     assert after["max_mm"] < geometric["max_mm"]
+    # the compensation takes the machine with its named effect: the result must carry it
+    desired = tmp_path / "desired.csv"
+    desired.write_text("pose_id,x_mm,y_mm,z_mm\n1,5.0,-3.0,222.0\n2,-8.0,4.0,215.0\n")
+    common = [*_files(stewart)[:4], "--poses", desired, "--diagnosis", diag]
+    code, text = _cli(
+        capsys, "compensate", *common, "--result", result, "--out", tmp_path / "c.csv"
+    )
+    assert code == EXIT_OK and "with gain_error (6 parameters" in text, text
+    plain = tmp_path / "r.json"
+    _cli(capsys, "identify", *_files(stewart), "--set", "calibration", "--out", plain)
+    code, text = _cli(capsys, "compensate", *common, "--result", plain, "--out", tmp_path / "x.csv")
+    assert code == 2 and "--with" in text and not (tmp_path / "x.csv").exists()
 
 
 @pytest.mark.accuracy
