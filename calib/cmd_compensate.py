@@ -2,6 +2,7 @@
 
     python -m calib compensate --model M.xml --errors E.toml --result R.json
                                --poses desired.csv --out commands.csv [--frame base|tracker]
+                               [--diagnosis D.json]
 
 Reads desired tool poses (calib.desired_poses: ``pose_id,x_mm,y_mm,z_mm[,rx_deg,ry_deg,
 rz_deg]``), in the machine's base frame or, with ``--frame tracker``, in the tracker's frame
@@ -12,6 +13,11 @@ predicts at those commands, and the error it predicts for the nominal commands) 
 sidecar ``commands.json`` (units, frame, the poses not reachable and why). A pose out of
 reach or past a stroke is named with the actuator and by how much; the others are written.
 Exit 0 when every pose was reachable, 5 when some were not, 2 on bad input (nothing written).
+
+With ``--diagnosis D.json`` the machine compensated is the identified one with the effect the
+diagnosis named: the result must be the one ``identify --with D.json`` wrote (geometry and
+effect fitted together, the effect's parameters among the result's); a result fitted without
+it is refused with that advice rather than combined with the diagnosis's own estimate.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import numpy as np
 from calib.atomic_files import json_text
 from calib.compensate_poses import Compensation, compensate
 from calib.desired_poses import DesiredPoses, DesiredPosesError, read_desired_poses
+from calib.effect_kinds import EffectFileError, load_effect
 from calib.identified_machine import IdentifiedMachine, load_identified_machine
 from calib.identify import model_from_files
 from calib.verdict import EXIT_OK, EXIT_UNREACHABLE
@@ -51,6 +58,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--poses", required=True, help="desired tool poses: pose_id,x_mm,y_mm,z_mm[,rx_deg,...]"
     )
     p.add_argument("--out", required=True, help="the commands CSV to write (and its .json)")
+    p.add_argument(
+        "--diagnosis",
+        metavar="D.json",
+        help="the diagnosis whose named effect the result carries (identify --with D.json): "
+        "checked, and the machine compensated with it",
+    )
     p.add_argument(
         "--frame",
         choices=FRAMES,
@@ -151,9 +164,27 @@ def sidecar(args: argparse.Namespace, machine: IdentifiedMachine, comp: Compensa
     }
 
 
+def with_diagnosis(model, machine: IdentifiedMachine, path: str) -> str:
+    """Check that the result carries the effect the diagnosis ``path`` named; a sentence."""
+    block = load_effect(path, model)
+    carried = {p["name"] for p in machine.result.data.get("added_parameters") or []}
+    wanted = [p["name"] for p in block["added_parameters"]]
+    missing = [n for n in wanted if n not in carried]
+    if missing:
+        raise EffectFileError(
+            f"the result {machine.result.path} was fitted without the effect {path} names "
+            f"({block['named']}: {', '.join(missing[:4])} missing): run `calib identify ... "
+            f"--with {path} --out R.json` and compensate that result, where geometry and "
+            "effect are fitted together"
+        )
+    return f"with {block['named']} ({len(wanted)} parameters fitted with the geometry)"
+
+
 def run(args: argparse.Namespace) -> int:
     model = model_from_files(args.model, args.errors)
     machine = load_identified_machine(model, args.result)
+    if args.diagnosis:
+        print(with_diagnosis(model, machine, args.diagnosis))
     desired = read_desired_poses(args.poses)
     poses = poses_in_base(desired, args.frame, machine)
     comp = compensate(machine, poses, desired.pose_ids)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from calib.__main__ import main as calib_main
-from calib.dataset import Dataset, write_dataset
+from calib.dataset import write_dataset
 from calib.registration import Registration
 from calib.result_file import load_result
 from scenarios.config import Scenario, ScenarioError
@@ -33,6 +33,7 @@ from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.serial_arm_loop import close_the_loop
 from scenarios.truth_draw import TruthSpec, draw_truth
+from scenarios.twin_datasets import tracker_frame_dataset
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
@@ -52,28 +53,6 @@ def _joints(mech: Mechanism, n: int, fraction: float, rng: np.random.Generator) 
     lo, hi = mech.actuator_range.T
     mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
     return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
-
-
-def _dataset(
-    truth: Mechanism, tracker: Tracker, commands: np.ndarray, n_cal: int, sigma_mm: float, rng
-) -> Dataset:
-    """What the tracker exports: readings in its own frame, a set column, its accuracy."""
-    n = len(commands)
-    readings = tracker.in_own_frame(tracker.measure(forward_batch(truth, commands).targets, rng))
-    return Dataset(
-        model=truth.name,
-        frame="tracker",
-        actuator_names=truth.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
-        target_names=truth.target_names,
-        pose_ids=np.arange(1, n + 1),
-        sets=np.array(["calibration"] * n_cal + ["test"] * (n - n_cal)),
-        commands=commands,
-        readings=readings,
-        order=np.arange(n),
-        tracker={"noise": tracker.noise.describe(), "sigma_mm": sigma_mm},
-        notes="twin: generic 6R arm, tracker in its own frame",
-    )
 
 
 def _cli(args: list[str], log: Path) -> int:
@@ -117,7 +96,15 @@ def _variant(
     sigma_mm = scenario.get("tracker.sigma_mm", float)
     (out_dir / "datasets").mkdir(parents=True, exist_ok=True)
     data = write_dataset(
-        _dataset(truth, tracker, commands, n_cal, sigma_mm, rng),
+        tracker_frame_dataset(
+            truth,
+            tracker,
+            commands,
+            n_cal,
+            sigma_mm,
+            rng,
+            notes="twin: generic 6R arm, tracker in its own frame",
+        ),
         out_dir / "datasets" / f"{name}.csv",
     )
     result_json, verify_json = out_dir / f"{name}_result.json", out_dir / f"{name}_verify.json"

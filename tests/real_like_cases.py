@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.dataset import Dataset, write_dataset
+from calib.dataset import write_dataset
+from scenarios.twin_datasets import tracker_frame_dataset
 from twin.effects import ActuatorGain, JointCompliance, ReflectorOffset
-from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
@@ -67,22 +67,8 @@ def _write(
     path: Path,
     rng: np.random.Generator,
 ) -> Path:
-    m = measure(truth, commands, tracker, rng, effects=effects)
-    n = len(commands)
-    ds = Dataset(
-        model=truth.name,
-        frame="tracker",
-        actuator_names=truth.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
-        target_names=truth.target_names,
-        pose_ids=np.arange(1, n + 1),
-        sets=np.array(["calibration"] * n_cal + ["test"] * (n - n_cal)),
-        commands=commands,
-        readings=tracker.in_own_frame(m.readings),
-        order=np.arange(n),
-        tracker={"sigma_mm": sigma_mm},
-        notes="twin-made data with real characteristics (tests/real_like_cases.py)",
-    )
+    notes = "twin-made data with real characteristics (tests/real_like_cases.py)"
+    ds = tracker_frame_dataset(truth, tracker, commands, n_cal, sigma_mm, rng, effects, notes)
     return write_dataset(ds, path)
 
 

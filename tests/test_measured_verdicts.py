@@ -56,6 +56,12 @@ def _held_out_plain(case: cases.Case) -> tuple[float, float]:
     return v.after.position.rms_mm, v.after.position.max_mm
 
 
+def _identify_with(capsys, case: cases.Case, diag: Path, out: Path) -> tuple[int, str]:
+    """identify --with the diagnosis ``diag`` on the calibration rows."""
+    args = ["identify", *_files(case), "--set", "calibration", "--with", diag, "--out", out]
+    return _cli(capsys, *args)
+
+
 def _identify_verify(capsys, case: cases.Case, tmp: Path) -> tuple[dict, dict, str]:
     result, verified = tmp / "r.json", tmp / "v.json"
     code, text = _cli(capsys, "identify", *_files(case), "--set", "calibration", "--out", result)
@@ -226,17 +232,7 @@ def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
     added = d["effect"]["added_parameters"]
     assert [a["kind"] for a in added] == ["actuator_gain"] * 6
     result, verified = tmp_path / "rw.json", tmp_path / "vw.json"
-    code, text = _cli(
-        capsys,
-        "identify",
-        *_files(stewart),
-        "--set",
-        "calibration",
-        "--with",
-        diag,
-        "--out",
-        result,
-    )
+    code, text = _identify_with(capsys, stewart, diag, result)
     assert code == EXIT_OK, text
     r = json.loads(result.read_text())
     gain = r["parameters"]["leg2.gain"]
@@ -258,6 +254,18 @@ def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
     geometric = d["test"]["before"]
     assert after["rms_mm"] < 0.9 * geometric["rms_mm"]
     assert after["max_mm"] < geometric["max_mm"]
+    # the compensation takes the machine with its named effect: the result must carry it
+    desired = tmp_path / "desired.csv"
+    desired.write_text("pose_id,x_mm,y_mm,z_mm\n1,5.0,-3.0,222.0\n2,-8.0,4.0,215.0\n")
+    common = [*_files(stewart)[:4], "--poses", desired, "--diagnosis", diag]
+    code, text = _cli(
+        capsys, "compensate", *common, "--result", result, "--out", tmp_path / "c.csv"
+    )
+    assert code == EXIT_OK and "with gain_error (6 parameters" in text, text
+    plain = tmp_path / "r.json"
+    _cli(capsys, "identify", *_files(stewart), "--set", "calibration", "--out", plain)
+    code, text = _cli(capsys, "compensate", *common, "--result", plain, "--out", tmp_path / "x.csv")
+    assert code == 2 and "--with" in text and not (tmp_path / "x.csv").exists()
 
 
 @pytest.mark.accuracy
@@ -335,17 +343,7 @@ def test_hexapod_with_offset_reflectors_is_diagnosed_and_refitted(capsys, tmp_pa
         got = fitted[name]
         assert abs(got["value"] - t) < 3 * got["std"] + 1e-9, (name, got, t)
     with_effect, v2 = tmp_path / "rw.json", tmp_path / "vw.json"
-    code, text = _cli(
-        capsys,
-        "identify",
-        *_files(case),
-        "--set",
-        "calibration",
-        "--with",
-        diag,
-        "--out",
-        with_effect,
-    )
+    code, text = _identify_with(capsys, case, diag, with_effect)
     assert code == EXIT_OK and "consistent with the tracker noise" in text, text
     code, text = _cli(
         capsys, "verify", *_files(case), "--result", with_effect, "--set", "test", "--out", v2
