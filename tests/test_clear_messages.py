@@ -19,7 +19,7 @@ from calib.verdict import EXIT_BAD_INPUT, EXIT_OK, EXIT_POOR_FIT
 from scenarios import serial_arm
 from scenarios.config import ScenarioError
 from scenarios.runner import run_scenario
-from scenarios.twin_datasets import measured_dataset
+from scenarios.twin_datasets import measured_dataset, tracker_frame_dataset
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
@@ -133,7 +133,7 @@ def test_readings_in_metres_in_a_tracker_frame_lead_with_units(tmp_path, capsys)
     lo, hi = nominal.actuator_range.T
     commands = rng.uniform(0.8 * lo, 0.8 * hi, (40, nominal.n_actuators))
     tracker = Tracker(position_m=(4.0, 2.0, 0.5), noise=TrackerNoise("gaussian", 1e-5, 0.0))
-    ds = serial_arm._dataset(nominal, tracker, commands, 40, 0.01, rng)
+    ds = tracker_frame_dataset(nominal, tracker, commands, 40, 0.01, rng)
     metres = write_dataset(replace(ds, readings=ds.readings * 1e-3), tmp_path / "m.csv")
     argv = ["identify", "--model", str(model), "--errors", str(errors), "--data", str(metres)]
     code, text = _run(argv, capsys)
