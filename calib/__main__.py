@@ -42,8 +42,6 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from calib import cmd_compensate, cmd_export
 from calib.atomic_files import json_text
 from calib.cli_common import (
@@ -181,12 +179,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     print(selection)
     print(v.note)
     for side in ("before", "after"):
-        s = getattr(v, side)
-        line = f"{side:6s}: 3D position error per reading {s.position.describe()}"
-        if s.orientation_deg is not None:
-            o = s.orientation_deg
-            line += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
-        print(line)
+        print(getattr(v, side).line(f"{side:6s}"))
     if args.out:
         from calib.verify_figure import save_verification_png
 

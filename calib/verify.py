@@ -41,6 +41,14 @@ class Side:
             }
         return out
 
+    def line(self, label: str) -> str:
+        """One printed line: ``label``, the 3D position error per reading, the orientation's."""
+        text = f"{label}: 3D position error per reading {self.position.describe()}"
+        if self.orientation_deg is not None:
+            o = self.orientation_deg
+            text += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
+        return text
+
 
 @dataclass(frozen=True)
 class Verification:

@@ -104,12 +104,7 @@ def run(args: argparse.Namespace) -> int:
     scored, selection = score_as_is(mech, dataset, args.set)
     print(selection)
     print(scored.note)
-    s = scored.side
-    line = f"model as it is: 3D position error per reading {s.position.describe()}"
-    if s.orientation_deg is not None:
-        o = s.orientation_deg
-        line += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
-    print(line)
+    print(scored.side.line("model as it is"))
     if args.out:
         out = Path(args.out)
         content = {"model": str(args.model), "data": str(args.data), "set": args.set}
