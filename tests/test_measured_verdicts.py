@@ -189,6 +189,34 @@ def test_cobot_with_an_honest_tracker_accuracy_runs_the_loop(cobot, capsys, tmp_
     # own fit reached, and no worse at the largest error
     assert v["rms_mm"] < 1.1 * noise_3d and v["rms_mm"] < 1.05 * after["rms_mm"]
     assert v["max_mm"] < 1.1 * after["max_mm"]
+    # the compensation and the export take the machine with its compliance
+    desired = tmp_path / "desired.csv"
+    desired.write_text("pose_id,x_mm,y_mm,z_mm,rx_deg,ry_deg,rz_deg\n1,600,100,500,180,0,0\n")
+    files = _files(cobot)[:4]
+    code, text = _cli(
+        capsys,
+        "compensate",
+        *files,
+        "--result",
+        refit,
+        "--poses",
+        desired,
+        "--diagnosis",
+        out,
+        "--out",
+        tmp_path / "c.csv",
+    )
+    assert code == EXIT_OK and "with gravity_compliance (4 parameters" in text, text
+    written = json.loads((tmp_path / "c.json").read_text())
+    assert written["n_written"] == 1
+    row = (tmp_path / "c.csv").read_text().splitlines()
+    got = dict(zip(row[0].split(","), row[1].split(","), strict=True))
+    # the identified machine, compliance and all, puts the tool where asked at those commands
+    assert float(got["predicted_residual_mm"]) < 1e-9
+    code, text = _cli(
+        capsys, "export", *files, "--result", refit, "--out", tmp_path / "calibrated.xml"
+    )
+    assert code == EXIT_OK and "joint compliances, no geometry" in text, text
 
 
 def test_verify_of_a_refused_result_says_so(cobot, capsys, tmp_path):
