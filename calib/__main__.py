@@ -54,7 +54,7 @@ from calib.cli_common import (
 )
 from calib.cli_diagnose import cmd_diagnose
 from calib.dataset import DatasetError, read_dataset, sidecar_path
-from calib.effect_kinds import model_for_result
+from calib.effect_kinds import model_for_result, parameter_entry
 from calib.exceptions import CalibError
 from calib.identify import model_from_files
 from calib.result_file import load_result, result_text
@@ -133,9 +133,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
             content["with"] = str(args.with_effect)
             content["added_parameters"] = [
-                {"name": p.name, "kind": p.kind, "element": p.element, "axis": list(p.axis)}
-                for p in run.model.params.parameters
-                if p.name not in base
+                parameter_entry(p) for p in run.model.params.parameters if p.name not in base
             ]
         write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
