@@ -19,6 +19,7 @@ number was not measured is left out of it. The top-level keys of earlier version
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 from bench.fk import fk_rates
@@ -26,7 +27,8 @@ from bench.identification import SCIPY_OPTIONS, compare
 from bench.machines import MACHINES
 from bench.report import bench_markdown
 from bench.scenario_times import scenario_times
-from calib.atomic_files import write_json_atomic, write_text_atomic
+from calib.atomic_files import json_text
+from calib.write_set import write_files
 from scenarios.config import REPO_ROOT
 
 TARGETS = {
@@ -95,8 +97,12 @@ def main() -> None:
         "make test": "<= 3 min on 2 cores: a test-suite target, not timed by the benchmark"
     }
     results = Path(REPO_ROOT / "results")
-    path = write_json_atomic(results / "bench.json", out)
-    write_text_atomic(results / "bench.md", bench_markdown(out))
+    path = results / "bench.json"
+    try:  # both files, or neither
+        write_files({path: json_text(out), results / "bench.md": bench_markdown(out)}, True)
+    except OSError as exc:  # a full disk, a read-only results folder
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
     print(f"wrote {path} and {results / 'bench.md'}")
 
 

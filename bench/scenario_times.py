@@ -1,7 +1,7 @@
 """Wall time of every scenario (scenarios/*.toml) run whole through scenarios.runner into a
 temporary results root, never results/. The slow studies (optimal_poses, every
-diagnosis_benchmark*, the 100-draw liu_vs_ols_draws; minutes to tens of minutes each) only
-with BENCH_ALL=1.
+diagnosis_benchmark*, the 100-draw liu_vs_ols_draws, the liu_regime map; minutes to tens of
+minutes each) only with BENCH_ALL=1.
 
 liu_vs_ols is also timed without figures and recording (``run_scenario(..., record=False,
 figures=False)``, the runner's switch; the study computes the same numbers).
@@ -17,7 +17,7 @@ from pathlib import Path
 from scenarios.config import REPO_ROOT
 from scenarios.runner import run_scenario
 
-SLOW = ("optimal_poses", "diagnosis_benchmark", "liu_vs_ols_draws")  # name prefixes
+SLOW = ("optimal_poses", "diagnosis_benchmark", "liu_vs_ols_draws", "liu_regime")  # name prefixes
 
 
 def is_slow(name: str) -> bool:

@@ -7,6 +7,10 @@
                              [--set test] [--out V.json]
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
                              [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
+    python -m calib compensate --model M.xml --errors E.toml --result R.json
+                             --poses desired.csv --out commands.csv [--frame base|tracker]
+    python -m calib export   --model M.xml --errors E.toml --result R.json
+                             --out M_calibrated.xml [--dh-out T.csv]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
@@ -16,14 +20,17 @@ where that predicts held-out poses no worse (``--plain``: never). ``--with D.jso
 effect a diagnosis named to the error model. ``verify`` scores any set before (nominal) and
 after (identified): the 3D position error per reading (RMS, mean, max), a per-reading CSV and
 a PNG. ``diagnose`` asks whether the residual is more than the tracker noise and which
-physical effect explains it, judged on held-out poses.
+physical effect explains it, judged on held-out poses. ``compensate`` turns desired tool
+poses into the commands that put the identified machine there; ``export`` writes the
+calibrated model (MJCF; DH table for a DH-generated arm); ``verify`` without ``--result``
+scores a model as it is.
 
 Exit codes (calib.verdict): 0 success (a residual above the tracker noise is said, not
 refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
 do not fit the model (a likely data error named, too many outliers, implausible estimates
 the data determine well, an implausible residual, or a residual above an explicit
-``--max-ratio``); verify of a result identify refused exits with identify's code; 130
-interrupted.
+``--max-ratio``); verify of a result identify refused exits with identify's code; 5 some
+desired poses out of reach (compensate); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -31,26 +38,26 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import os
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from calib.atomic_files import write_json_atomic, write_text_atomic
+from calib import cmd_compensate, cmd_export
+from calib.atomic_files import json_text
 from calib.cli_common import (
-    positive_float,
     positive_int,
     print_verdict,
     prior_spec,
     ratio_float,
     run_fit,
+    sigma_float,
 )
 from calib.cli_diagnose import cmd_diagnose
-from calib.dataset import DatasetError, read_dataset
-from calib.effect_kinds import model_for_result
+from calib.dataset import DatasetError, read_dataset, sidecar_path
+from calib.effect_kinds import model_for_result, parameter_entry
 from calib.exceptions import CalibError
 from calib.identify import model_from_files
-from calib.result_file import load_result, write_result
+from calib.result_file import load_result, result_text
 from calib.verdict import (
     DEFAULT_MAX_RATIO,
     EXIT_BAD_INPUT,
@@ -63,6 +70,7 @@ from calib.workflow import (
     result_content,
     verify_result,
 )
+from calib.write_set import write_files
 from twin.exceptions import TwinError
 
 
@@ -125,11 +133,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
             base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
             content["with"] = str(args.with_effect)
             content["added_parameters"] = [
-                {"name": p.name, "kind": p.kind, "element": p.element, "axis": list(p.axis)}
-                for p in run.model.params.parameters
-                if p.name not in base
+                parameter_entry(p) for p in run.model.params.parameters if p.name not in base
             ]
-        write_result(args.out, content)
+        write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
 
 
@@ -149,6 +155,12 @@ def _refused(loaded) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
+    if args.result is None:  # the model as it is, e.g. one written by export
+        from calib import verify_as_is
+
+        return verify_as_is.run(args)
+    if args.errors is None:
+        raise CalibError("verify --result needs --errors (the error model of the result)")
     model = model_from_files(args.model, args.errors)
     loaded = load_result(args.result, expected_model=model.nominal.name)
     model = model_for_result(model, loaded.data)
@@ -165,27 +177,29 @@ def cmd_verify(args: argparse.Namespace) -> int:
     print(selection)
     print(v.note)
     for side in ("before", "after"):
-        s = getattr(v, side)
-        line = f"{side:6s}: 3D position error per reading {s.position.describe()}"
-        if s.orientation_deg is not None:
-            o = s.orientation_deg
-            line += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
-        print(line)
+        print(getattr(v, side).line(f"{side:6s}"))
     if args.out:
-        out = Path(args.out)
-        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
-        write_json_atomic(out, {**content, **v.as_dict(), "selection": selection})
-        write_text_atomic(out.with_suffix(".csv"), _csv_text(v.rows()))
         from calib.verify_figure import save_verification_png
 
-        save_verification_png(v, out.with_suffix(".png"))
+        out = Path(args.out)
+        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
+        write_files(  # the three files together, or none of them
+            {
+                out: json_text({**content, **v.as_dict(), "selection": selection}),
+                out.with_suffix(".csv"): _csv_text(v.rows()),
+                out.with_suffix(".png"): lambda tmp: save_verification_png(v, tmp),
+            },
+            make_parents=True,
+        )
         print(f"wrote {out}, {out.with_suffix('.csv')} and {out.with_suffix('.png')}")
     return refused
 
 
-def _model_options(p: argparse.ArgumentParser) -> None:
+def _model_options(p: argparse.ArgumentParser, errors_required: bool = True) -> None:
     p.add_argument("--model", required=True, help="nominal MJCF of the machine")
-    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
+    p.add_argument(
+        "--errors", required=errors_required, help="error model (TOML [[parameter]] list)"
+    )
     p.add_argument("--data", required=True, help="Dataset CSV (with its .json sidecar)")
     p.add_argument("--out", help="write the result as JSON here (atomically)")
 
@@ -223,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
     _fit_options(ident)
     ident.add_argument(
         "--sigma-mm",
-        type=positive_float,
+        type=sigma_float,
         help="tracker accuracy per coordinate (mm); default: the sidecar's tracker.sigma_mm, "
         "else 0.05 mm assumed",
     )
@@ -260,8 +274,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="(the default now) keep unidentifiable parameters at zero",
     )
     ver = sub.add_parser("verify", help="score a dataset before and after a calibration")
-    _model_options(ver)
-    ver.add_argument("--result", required=True, help="result JSON written by identify --out")
+    _model_options(ver, errors_required=False)
+    ver.add_argument(
+        "--result",
+        help="result JSON written by identify --out; without it the model is scored as it is "
+        "(e.g. one written by export), a tracker frame registered on the calibration rows",
+    )
     ver.add_argument("--set", help="score the rows of this set (default: all rows)")
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
@@ -270,7 +288,7 @@ def build_parser() -> argparse.ArgumentParser:
     _fit_options(diag)
     diag.add_argument(
         "--sigma-mm",
-        type=positive_float,
+        type=sigma_float,
         help="tracker noise per coordinate (mm); default: from the repeat readings, else the "
         "sidecar's tracker.sigma_mm; a typed value is checked against the repeats",
     )
@@ -284,15 +302,60 @@ def build_parser() -> argparse.ArgumentParser:
         "--test-set",
         help="hold out the rows of this set (of --test FILE, or of --data) as the test set",
     )
+    for command in (cmd_compensate, cmd_export):  # each subcommand in its own module
+        command.add_parser(sub)
     return parser
 
 
 COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
+COMMANDS.update({"compensate": cmd_compensate.run, "export": cmd_export.run})
+# the files each command writes beside --out (same name, another suffix)
+WRITTEN_BESIDE = {
+    "identify": (),
+    "verify": (".csv", ".png"),
+    "diagnose": (".png",),
+    "compensate": (".json",),
+    "export": (),
+}
+
+
+def check_out(args: argparse.Namespace) -> None:
+    """Refuse, before any work, an ``--out`` whose files would overwrite an input or each
+    other (``verify --out v.csv``) or that names a folder."""
+    if not getattr(args, "out", None):
+        return
+    out = Path(args.out)
+    outs = [out, *(out.with_suffix(s) for s in WRITTEN_BESIDE.get(args.command, ()))]
+    if getattr(args, "dh_out", None):
+        outs.append(Path(args.dh_out))
+    if len(set(outs)) < len(outs):
+        raise ValueError(
+            f"--out {out}: a file written beside it would take its own name; give the main "
+            "file its own suffix (verify and diagnose: .json, compensate: .csv)"
+        )
+    if out.is_dir():
+        raise ValueError(f"--out {out} is a folder; name the file to write")
+    roles = {
+        "model": "the nominal model itself",
+        "errors": "the error model",
+        "data": "the dataset",
+        "result": "the result file",
+        "test": "the test dataset",
+        "poses": "the desired poses",
+    }
+    inputs = {getattr(args, k, None): role for k, role in roles.items()}
+    for path in [p for p in inputs if p and str(p).endswith(".csv")]:
+        inputs[str(sidecar_path(path))] = f"the sidecar of {path}"
+    for o in outs:
+        for i, role in inputs.items():
+            if i and o.exists() and Path(i).exists() and os.path.samefile(o, i):
+                raise ValueError(f"--out {o} would overwrite an input file: {role} ({i})")
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        check_out(args)
         return COMMANDS[args.command](args)
     except (DatasetError, CalibError, TwinError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

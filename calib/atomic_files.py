@@ -81,10 +81,23 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
     return Path(path)
 
 
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically; returns the path."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    return Path(path)
+
+
+def json_text(data: Any) -> str:
+    """``data`` as strict JSON text (NaN and inf become null), indented, newline-ended."""
+    return json.dumps(plain_json(data), indent=2, allow_nan=False) + "\n"
+
+
 def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
     """Write ``data`` as strict JSON (NaN and inf become null) atomically."""
-    text = json.dumps(plain_json(data), indent=2, allow_nan=False) + "\n"
-    return write_text_atomic(path, text)
+    return write_text_atomic(path, json_text(data))
 
 
 def write_with_atomic(

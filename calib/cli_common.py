@@ -10,7 +10,7 @@ from calib.dataset import read_dataset
 from calib.effect_kinds import extended_model, load_effect
 from calib.identify import model_from_files
 from calib.prior import PriorSpec
-from calib.verdict import EXIT_BAD_INPUT, EXIT_POOR_FIT, Verdict
+from calib.verdict import EXIT_BAD_INPUT, EXIT_POOR_FIT, MAX_SIGMA_MM, Verdict
 from calib.workflow import CalibrationRun, FitFailed, calibrate
 
 
@@ -22,6 +22,17 @@ def positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return value
+
+
+def sigma_float(text: str) -> float:
+    """argparse type: a tracker accuracy in mm, finite, > 0 and at most MAX_SIGMA_MM."""
+    value = positive_float(text)
+    if value > MAX_SIGMA_MM:
+        raise argparse.ArgumentTypeError(
+            f"{value:g} mm is beyond {MAX_SIGMA_MM:g} mm: no measuring system of a machine is "
+            "that coarse (the value is in millimetres per coordinate)"
+        )
     return value
 
 

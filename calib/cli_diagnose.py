@@ -9,13 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import write_json_atomic
+from calib.atomic_files import json_text
 from calib.cli_common import print_verdict, run_fit
 from calib.dataset import DatasetError, read_dataset
 from calib.dataset_select import select_set, subset
 from calib.effect_kinds import effect_content
 from calib.verdict import EXIT_OK
 from calib.workflow import CalibrationRun, rejected_rows
+from calib.write_set import write_files
 
 
 def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[object, str] | None:
@@ -132,6 +133,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         n_repeats=ds.n_repeats,
         tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
         test=test,
+        registration=run.result.registration is not None,
     )
     noise = diag.noise.as_dict() if diag.noise is not None else {}
     print(
@@ -180,16 +182,18 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             "effect_parameters": diag.effect_parameters,
             "residual_structure": diag.structure_detail,
             "metric": "3D position error per reading |p_measured - p_model| (mm)",
-            "effect": effect_content(run.model, diag.chosen),
+            "effect": effect_content(run.model, diag.chosen, diag.effect_parameters),
         }
         if diag.test is not None:
             content["test"] = {
                 side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
                 for side in ("before", "after")
             }
+        files: dict = {}
         if diag.plot is not None:
             from calib.diagnosis_figure import save_diagnosis_png
 
-            content["figure"] = str(save_diagnosis_png(diag, out.with_suffix(".png")))
-        write_json_atomic(out, content)
+            content["figure"] = str(out.with_suffix(".png"))
+            files[out.with_suffix(".png")] = lambda tmp: save_diagnosis_png(diag, tmp)
+        write_files({out: json_text(content), **files}, make_parents=True)  # both, or neither
     return EXIT_OK

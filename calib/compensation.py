@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.compensate_poses import solve_each
 from calib.model import CalibrationModel
-from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics import inverse
 from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
@@ -24,7 +24,7 @@ def compensated_commands(
     model: CalibrationModel, values: np.ndarray, poses: np.ndarray
 ) -> np.ndarray:
     """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected
-    (through its actuator gains, if it has any)."""
+    (through its joint compliances and actuator gains, if it has any)."""
     return model.commands_for_joints(values, commands_for_poses(model.mechanism(values), poses))
 
 
@@ -33,17 +33,12 @@ def reachable_compensated_commands(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Like :func:`compensated_commands`, but a pose whose compensated commands leave a
     stroke is reported (mask False, its row NaN) instead of stopping the whole set: near the
-    workspace boundary the real machine may not reach what its nominal model could."""
-    mech = model.mechanism(values)
-    out = np.full((len(poses), mech.n_actuators), np.nan)
-    ok = np.zeros(len(poses), dtype=bool)
-    for i, pose in enumerate(np.atleast_2d(poses)):
-        try:
-            out[i] = model.commands_for_joints(values, commands_for_poses(mech, pose[None]))[0]
-            ok[i] = True
-        except (WorkspaceError, ClosureError):
-            continue
-    return out, ok
+    workspace boundary the real machine may not reach what its nominal model could. The
+    same solve, pose by pose from home, as ``python -m calib compensate``
+    (calib.compensate_poses.solve_each), the joint values turned into commands through the
+    model's joint compliances and actuator gains (if any)."""
+    solved = solve_each(model.mechanism(values), poses)
+    return model.commands_for_joints(values, solved.commands, solved.qpos), solved.reachable
 
 
 def corrected_poses(poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
@@ -96,8 +91,8 @@ class TwistCompensation:
         corrected = corrected_poses(self.poses, twists)
         # every pose at once, each from its first inverse kinematics (the same exact inverse
         # kinematics as twin.kinematics.inverse, to round-off; the same errors)
-        joints = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
-        return self.model.commands_for_joints(self.base_values, joints)
+        joints, qpos = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)
+        return self.model.commands_for_joints(self.base_values, joints, qpos)
 
 
 def twist_compensated_commands(

@@ -1,7 +1,7 @@
 """CSV + JSON sidecar reading and writing for :mod:`calib.dataset`.
 
 File units are millimetres and degrees; the returned :class:`~calib.dataset.Dataset`
-is SI. Both files are written atomically (temporary sibling, then ``os.replace``), with the
+is SI. Both files are written as one set (:mod:`calib.write_set`: both or neither), with the
 mode of an ordinary file (0644 less the umask). Both are read as UTF-8 (a UTF-8 byte-order
 mark is accepted); another encoding, another delimiter than ',' or a malformed cell raises
 :class:`~calib.dataset.DatasetError` naming the file, line and column.
@@ -9,20 +9,17 @@ mark is accepted); another encoding, another delimiter than ',' or a malformed c
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import ordinary_mode
 from calib.dataset import (
     ACTUATOR_UNITS,
     FORMAT,
@@ -32,12 +29,17 @@ from calib.dataset import (
     check_names,
     sidecar_path,
 )
+from calib.write_set import write_files
 from twin.parameter_file import closest, read_utf8
 
 CMD_PREFIX = "cmd:"
 REQUIRED_COLUMNS = ("pose_id", "set", "target", "repeat", "x_mm", "y_mm", "z_mm")
 OPTIONAL_COLUMNS = ("order", "time_s")
 POSE_COLUMNS = ("pose_x_mm", "pose_y_mm", "pose_z_mm", "pose_rx_deg", "pose_ry_deg", "pose_rz_deg")
+INT64 = (-(2**63), 2**63 - 1)  # pose_id, repeat and order are stored as int64
+# No laser tracker or motion-capture system measures a machine from a kilometre away (trackers
+# reach 80-160 m): a reading beyond it is an export error (and its square overflows the fit)
+MAX_READING_MM = 1e6
 _SIDECAR_REQUIRED = ("format", "version", "model", "frame", "length_unit", "angle_unit")
 _SIDECAR_KEYS = {*_SIDECAR_REQUIRED, "actuators", "targets", "notes", "tracker", "meta"}
 
@@ -62,29 +64,6 @@ def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
-
-
-def _atomic_write(files: Sequence[tuple[Path, str]]) -> None:
-    """Write every file to a temporary sibling first, then ``os.replace`` each in turn.
-
-    The files get the mode of an ordinary new file (0644 less the umask), also when they
-    replace an existing file."""
-    temps: list[tuple[str, Path]] = []
-    try:
-        for target, text in files:
-            fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-            temps.append((tmp, target))
-            with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-                fh.write(text)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.chmod(tmp, ordinary_mode())  # 0644 less umask, like open(); not mkstemp's 0600
-        for tmp, target in temps:
-            os.replace(tmp, target)
-    finally:
-        for tmp, _ in temps:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(tmp)
 
 
 def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Path:
@@ -127,7 +106,7 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
         if getattr(ds, key) is not None:
             sidecar[key] = getattr(ds, key)
     text = json.dumps(sidecar, indent=2, ensure_ascii=False, allow_nan=False, default=_json_default)
-    _atomic_write([(path, buf.getvalue()), (sidecar_path(path), text + "\n")])
+    write_files({path: buf.getvalue(), sidecar_path(path): text + "\n"})  # both, or neither
     return path
 
 
@@ -219,6 +198,13 @@ def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[st
     pose = [c for c in POSE_COLUMNS if c in header]
     known = {*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS, *POSE_COLUMNS, *declared}
     unknown = [h for h in header if h not in known and h not in undeclared]
+    if not set(header) & ({*known, *undeclared} - set(OPTIONAL_COLUMNS)):
+        shown = ",".join(header)
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        raise DatasetError(
+            f"{path}: not a dataset CSV: its first line {shown!r} names none of the columns "
+            f"of the format ({', '.join(REQUIRED_COLUMNS)}, cmd:<actuator> ...)"
+        )
     for bad, what in (
         (dups, "duplicate column(s)"),
         (missing, "missing required column(s)"),
@@ -242,6 +228,16 @@ def _number(loc: str, column: str, text: str, integer: bool = False) -> float:
         raise DatasetError(f"{loc}, column {column!r}: expected {kind}, got {text!r}") from None
     if not math.isfinite(value):
         raise DatasetError(f"{loc}, column {column!r}: non-finite value {text!r}")
+    if integer and not INT64[0] <= value <= INT64[1]:
+        raise DatasetError(
+            f"{loc}, column {column!r}: {text} is outside the range of a 64-bit integer "
+            f"[{INT64[0]}, {INT64[1]}]"
+        )
+    if column.endswith("_mm") and abs(value) > MAX_READING_MM:
+        raise DatasetError(
+            f"{loc}, column {column!r}: {value:g} mm is beyond {MAX_READING_MM:g} mm (1 km), "
+            "no reading of a machine; check the export"
+        )
     return value
 
 
@@ -336,7 +332,7 @@ def read_csv_dataset(
         if not any(header):
             raise DatasetError(f"{path}: empty file (no header and no data rows)")
         delimiter = _other_delimiter(header)
-        if delimiter is not None:
+        if delimiter is not None and set(header[0].split(delimiter)) & set(REQUIRED_COLUMNS):
             raise DatasetError(f"{path} line {reader.line_num}: {_delimiter_message(delimiter)}")
         col = _columns(path, header, acts)
         rows = [(reader.line_num, r) for r in reader if any(c.strip() for c in r)]

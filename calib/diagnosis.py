@@ -51,13 +51,14 @@ from calib.diagnosis_candidates import (
     default_candidates,
     library,
 )
-from calib.diagnosis_context import build_context
+from calib.diagnosis_context import build_context, reflector_span
 from calib.diagnosis_fit import SCHEMES, Evaluation, Problem, fold_labels
 from calib.diagnosis_noise import NoiseLevel, check_against_residual, chi_square_p, noise_level
 from calib.diagnosis_plot import plot_data, plot_unexplained
 from calib.diagnosis_select import select_effects
 from calib.diagnosis_testset import (
     kernel_test,
+    rigid_columns,
     stats_3d,
     test_after,
     test_context,
@@ -145,6 +146,7 @@ def diagnose(
     n_repeats: int = 1,
     test: TestSet | None = None,
     max_effects: int = 3,
+    registration: bool = False,
 ) -> Diagnosis:
     """Diagnose the residual of a geometric calibration ``result`` on ``obs``.
 
@@ -153,7 +155,10 @@ def diagnose(
     ``test``: poses that took no part in the fit (commands, base-frame readings, their order):
     an effect must lower their error too. ``min_gain``: the relative drop of the held-out RMS
     an effect must bring in every fold scheme; ``alpha``: the one-sided Wilcoxon level of the
-    per-pose held-out improvement."""
+    per-pose held-out improvement. ``registration``: the readings were carried into the base
+    frame by a registration fitted with the geometry (tracker-frame data): its rigid motion
+    is refitted beside the geometry, or an effect's fit could not undo what the
+    registration absorbed of it."""
     n_poses = len(obs.commands)
     time, unit = _time(order, time_s, n_poses)
     t0 = float(np.min(time))
@@ -166,9 +171,10 @@ def diagnose(
     noise = noise_level(sigma_m, repeat_std_m, n_repeats)
     sum_sq = float(np.sum(r**2))
     p_value = chi_square_p(sum_sq, noise.sigma_m, n - p)
-    geo = (
-        model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p) * keep[:, :, None]
-    )
+    geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p)
+    if registration:
+        geo = np.concatenate([geo, rigid_columns(pred.targets)], axis=2)
+    geo = geo * keep[:, :, None]
     head = None if tracker_position_m is None else np.asarray(tracker_position_m, dtype=float)
     ctx = build_context(
         model, values, obs.commands, time - t0, unit, pred.qpos, pred.targets, head=head, rows=keep
@@ -185,7 +191,7 @@ def diagnose(
     tctx = tr = None
     if test is not None:
         tctx = test_context(model, values, test, t0, unit, ctx, head)
-        tr = test_residual(model, values, result.estimated, test, tctx)
+        tr = test_residual(model, values, result.estimated, test, tctx, registration)
     test_of: dict[tuple[str, ...], np.ndarray] = {}
 
     def test_errs(ev: Evaluation, cs: list[Candidate]) -> np.ndarray | None:
@@ -254,9 +260,9 @@ def diagnose(
             **common,
             chosen="+".join(names),
             reason=reason,
-            geometry_correction=ev.fit.beta,
+            geometry_correction=ev.fit.beta[:p],
             coefficients=_coefficients(chosen, ev),
-            effect_parameters=effect_parameters(prob, ctx, chosen, ev),
+            effect_parameters=effect_parameters(prob, ctx, chosen, ev, reflector_span(model)),
             notes=tuple(notes),
             test=test_block,
             plot=plot_data(ctx, r, keep, chosen, ev, prob),

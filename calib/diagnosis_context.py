@@ -224,3 +224,23 @@ def build_context(
         head=None if head is None else np.asarray(head, dtype=float),
         rows=rows,
     )
+
+
+def reflector_span(model: CalibrationModel) -> dict[str, np.ndarray]:
+    """``{"reflector_offsets": (k, 6)}``: what a small rigid motion (translation, rotation
+    about the body's origin) of the reflector set does to each extra reflector parameter
+    (its axis times the motion of its site), for :func:`calib.diagnosis_verdict.effect_parameters`;
+    empty when the extra reflector parameters are not all on one body."""
+    params = extra_parameters(model)["reflector_offsets"]
+    m = model.nominal.model
+    if not params:
+        return {}
+    sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, p.element) for p in params]
+    if len({int(m.site_bodyid[s]) for s in sites}) != 1:
+        return {}
+    rows = []
+    for p, s in zip(params, sites, strict=True):
+        pos = np.asarray(m.site_pos[s], dtype=float)
+        axis = np.asarray(p.axis, dtype=float)
+        rows.append(np.concatenate([axis, np.cross(pos, axis)]))  # a.(v + w x p)
+    return {"reflector_offsets": np.array(rows)}

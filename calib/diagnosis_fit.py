@@ -578,6 +578,7 @@ class Uncertainty:
     std: np.ndarray  # its standard errors, SI
     shape_std: tuple[float, ...]  # per candidate (NaN when no shape or not defined)
     sigma2: float  # residual variance per row
+    cov: np.ndarray | None = None  # of theta, SI (NaN rows and columns where not seen)
 
 
 def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluation) -> Uncertainty:
@@ -599,10 +600,12 @@ def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluat
     dof = max(ev.n_rows - q.shape[1] - xt.shape[1] - sum(c.shaped for c in cands), 1)
     sigma2 = float(resid @ resid) / dof
     std = np.full(xp.shape[1], np.nan)  # a parameter the data does not see: no std error
+    full_cov = np.full((xp.shape[1], xp.shape[1]), np.nan)
     if np.any(live):
         a = xp[:, live] / norms[live]
         cov = sigma2 * np.linalg.pinv(a.T @ a, rcond=RCOND) / np.outer(norms[live], norms[live])
         std[live] = np.sqrt(np.clip(np.diag(cov), 0, None))
+        full_cov[np.ix_(live, live)] = cov
     shape_std = []
     for i, (c, s) in enumerate(zip(cands, ev.shapes, strict=True)):
         if not c.shaped or not np.isfinite(s) or c.shape_name == "harmonic":
@@ -619,4 +622,4 @@ def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluat
         curv = (rss(u + h) - 2 * rss(u) + rss(u - h)) / h**2
         sd = float(np.sqrt(2 * sigma2 / curv)) if curv > 0 else float("nan")
         shape_std.append(s * sd if c.shape_log else sd)
-    return Uncertainty(theta, std, tuple(shape_std), sigma2)
+    return Uncertainty(theta, std, tuple(shape_std), sigma2, full_cov)

@@ -18,6 +18,7 @@ from calib.diagnosis_unexplained import features, kernel_correction
 from calib.diagnosis_verdict import TestSet
 from calib.model import CalibrationModel, Prediction
 from calib.position_error import stats_mm
+from calib.registration import rigid_motion_span
 
 
 @dataclass(frozen=True)
@@ -55,15 +56,31 @@ def test_context(
     return build_context(model, values, test.commands, t - t0, unit, previous=previous, head=head)
 
 
+def rigid_columns(targets: np.ndarray) -> np.ndarray:
+    """(N, T*3, 6): what a small rigid motion of the frame does to the targets (N, T, 3)."""
+    n = len(targets)
+    return rigid_motion_span(targets).reshape(n, -1, 6)
+
+
 def test_residual(
-    model: CalibrationModel, values: np.ndarray, estimated: np.ndarray, test: TestSet, tctx
+    model: CalibrationModel,
+    values: np.ndarray,
+    estimated: np.ndarray,
+    test: TestSet,
+    tctx,
+    registration: bool = False,
 ) -> TestResidual:
+    """The test poses' residual and geometric columns (and the registration's rigid motion
+    with ``registration``, as for the calibration poses)."""
     n = len(test.commands)
     r = (np.asarray(test.measured) - tctx.targets).reshape(n, -1)
     qpos = model.predict(values, test.commands).qpos
     jac = model.jacobian(values, Prediction(tctx.targets, qpos))
     p = int(np.sum(estimated))
-    return TestResidual(r, jac[:, estimated].reshape(n, -1, p))
+    geo = jac[:, estimated].reshape(n, -1, p)
+    if registration:
+        geo = np.concatenate([geo, rigid_columns(tctx.targets)], axis=2)
+    return TestResidual(r, geo)
 
 
 def test_after(tr: TestResidual, tctx: Context, cands: list[Candidate], ev: Evaluation):

@@ -79,18 +79,43 @@ def refusal(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluation)
 
 
 def effect_parameters(
-    prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluation
+    prob: Problem,
+    ctx: Context,
+    cands: list[Candidate],
+    ev: Evaluation,
+    rigid: dict[str, np.ndarray] | None = None,
 ) -> dict[str, dict]:
-    """Per effect: parameter -> value, std, unit (display units); the shape likewise."""
+    """Per effect: parameter -> value, std, unit (display units); the shape likewise.
+
+    ``rigid`` (candidate name -> (k, 6)): what a rigid motion does to that candidate's
+    parameters, where the data see them only up to one (reflector offsets beside the
+    platform's or flange's own errors): its values are then the rigid-motion-free part
+    (the offsets of the reflectors relative to each other), its std errors propagated, and a
+    ``note`` says so."""
     u = uncertainty(prob, ctx, cands, ev)
     out, start = {}, 0
     for i, (c, k) in enumerate(zip(cands, ev.sizes, strict=True)):
-        entry = {}
+        theta = ev.fit.theta[start : start + k]
+        std = u.std[start : start + k]
+        span = None if rigid is None else rigid.get(c.name)
+        note = ""
+        if span is not None and len(span) == k:
+            proj = np.eye(k) - span @ np.linalg.pinv(span)
+            theta = proj @ theta
+            block = u.cov[start : start + k, start : start + k] if u.cov is not None else None
+            if block is not None and np.all(np.isfinite(block)):
+                std = np.sqrt(np.clip(np.diag(proj @ block @ proj.T), 0, None))
+            note = (
+                "up to a rigid motion of the reflector set: the data fix the reflectors' "
+                "offsets relative to each other, not a common motion of all of them (the "
+                "tool's own errors take that); shown without it"
+            )
+        entry: dict = {}
         for j in range(k):
             f = c.factors[j]
             entry[c.parameters[j]] = {
-                "value": float(ev.fit.theta[start + j] * f),
-                "std": float(u.std[start + j] * f) if np.isfinite(u.std[start + j]) else None,
+                "value": float(theta[j] * f),
+                "std": float(std[j] * f) if np.isfinite(std[j]) else None,
                 "unit": c.units[j],
             }
         if c.shaped:
@@ -100,6 +125,8 @@ def effect_parameters(
                 "std": None if not np.isfinite(sd) else float(sd * c.shape_factor),
                 "unit": c.shape_unit,
             }
+        if note:
+            entry["note"] = {"value": note, "std": None, "unit": ""}
         out[c.name] = entry
         start += k
     return out

@@ -29,6 +29,9 @@ from calib.registration import (
 )
 from calib.registration import (
     Registration,
+    about,
+    about_jacobian,
+    centred,
     initial_registration,
     project_out,
     registration_jacobian,
@@ -318,8 +321,10 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     first = model.predict(x_start, commands)
     jac0 = model.jacobian(x_start, first)
     reg0 = jreg0 = None
+    centre = np.zeros(3)
     ranges = physical_ranges(model.params)
-    if obs.frame == "tracker":
+    if obs.frame == "tracker":  # the rotation turns about the readings' centre
+        measured, centre = centred(measured)
         reg0 = initial_registration(measured, first.targets)
         jreg0 = rigid_motion_span(first.targets)  # at the model's points: structure only
         r0 = (reg0.to_base(measured) - first.targets).reshape(-1)
@@ -431,6 +436,11 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     std = np.full(n, np.nan)
     std[free] = np.sqrt(np.clip(np.diag(cov)[:kf], 0, None))
     values, reg = split(res.x)
+    if reg is not None:  # from the centred readings back to the readings themselves
+        carry = np.eye(len(cov))
+        carry[kf:, kf:] = about_jacobian(reg0, res.x[k:], centre)
+        cov = carry @ cov @ carry.T
+        reg = about(reg, centre)
     return IdentificationResult(
         names=names,
         values=values,

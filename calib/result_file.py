@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import write_json_atomic
+from calib.atomic_files import json_text, write_json_atomic
 from calib.exceptions import CalibError
 from calib.prior import correlation_matrix
 from calib.registration import Registration, RegistrationError
@@ -67,9 +67,32 @@ def correlation_pairs(
     return sorted(out, key=lambda p: -abs(p["r"]))
 
 
+def result_text(content: dict[str, Any]) -> str:
+    """The file's text: ``content`` (the keys of :func:`calib.__main__`'s identify) with
+    format tags, as strict JSON."""
+    return json_text({"format": FORMAT, "version": VERSION, **content})
+
+
 def write_result(path: str | os.PathLike[str], content: dict[str, Any]) -> Path:
-    """Write ``content`` (the keys of :func:`calib.__main__`'s identify) with format tags."""
+    """Write :func:`result_text` of ``content`` atomically."""
     return write_json_atomic(path, {"format": FORMAT, "version": VERSION, **content})
+
+
+def unusable_values(loaded: CalibrationResult, params: Any, cause: Exception) -> ResultFileError:
+    """The error for a result at whose values the model cannot be evaluated (``cause``, e.g.
+    no closure): names the values beyond a plausible size, which are the likely reason."""
+    from calib.verdict import implausible_estimates
+
+    odd = implausible_estimates(loaded.names, loaded.display_values, params.display_units())
+    why = (
+        f"; values beyond a plausible size: {', '.join(odd[:5])}"
+        + (f" and {len(odd) - 5} more" if len(odd) > 5 else "")
+        if odd
+        else ""
+    )
+    return ResultFileError(
+        f"{loaded.path}: the model with this result's values cannot be evaluated ({cause}){why}"
+    )
 
 
 def load_result(
@@ -97,10 +120,14 @@ def load_result(
         raise ResultFileError(f"{p}: no 'parameters' table")
     names, values, est = [], [], []
     for name, entry in params.items():
-        try:
-            v = float(entry["value"])
-        except (KeyError, TypeError, ValueError):
-            raise ResultFileError(f"{p}: parameter '{name}' has no numeric 'value'") from None
+        raw = entry.get("value") if isinstance(entry, dict) else None
+        if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+            got = "none" if raw is None else f"{raw!r} ({type(raw).__name__})"
+            raise ResultFileError(
+                f"{p}: parameter '{name}' has no numeric 'value' (got {got}; a JSON number "
+                "is expected, not a string)"
+            )
+        v = float(raw)
         if not np.isfinite(v):
             raise ResultFileError(f"{p}: parameter '{name}' value is not finite")
         names.append(name)

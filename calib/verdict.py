@@ -18,6 +18,7 @@ residual into a failure for a user who wants that gate. Exit codes:
     4  the data do not fit the model: a likely data error named, too many outliers,
        implausible well-determined estimates, an implausible residual, or a residual above
        an explicit ``--max-ratio``
+    5  compensate: some desired poses are out of reach (each is named; the others written)
 """
 
 from __future__ import annotations
@@ -32,14 +33,21 @@ EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_POOR_FIT = 4
+EXIT_UNREACHABLE = 5
 DEFAULT_MAX_RATIO: float | None = None  # no gate on the residual's size unless asked
 # an estimate beyond these is not a manufacturing or assembly error but a fit that went
 # astray (a length error of 5 cm on a machine built to tenths of a millimetre)
 PLAUSIBLE_MM = 50.0
 PLAUSIBLE_DEG = 20.0
 PLAUSIBLE_PPM = 2e5  # an actuator gain 20 % off is a wrong factor, not a calibration error
+# a drive softer than 100 N m/rad (revolute) or 1e4 N/m (prismatic), under a payload of up to
+# 100 kg for the per-kg products, is a wrong model, not a joint compliance
+PLAUSIBLE_COMPLIANCE = {"deg/(kN m)": 600.0, "mm/kN": 100.0, "deg/(kN m) kg": 6e4, "mm/kN kg": 1e4}
 PLAUSIBLE_RESIDUAL_FRACTION = 0.01  # of the machine's reach, 3D RMS after calibration
 ASSUMED_SIGMA_MM = 0.05  # per coordinate: a laser tracker at a few metres plus repeatability
+# a tracker, motion capture or measuring arm is accurate to a few millimetres at worst; a
+# declared accuracy beyond this is a unit or typing mistake that would pass any fit
+MAX_SIGMA_MM = 100.0
 
 
 @dataclass(frozen=True)
@@ -52,6 +60,12 @@ class Accuracy:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sigma_mm) and self.sigma_mm > 0):
             raise ValueError(f"tracker accuracy must be a positive number, got {self.sigma_mm!r}")
+        if self.sigma_mm > MAX_SIGMA_MM:
+            raise ValueError(
+                f"tracker accuracy {self.sigma_mm:g} mm per coordinate ({self.source}) is beyond "
+                f"{MAX_SIGMA_MM:g} mm: no measuring system of a machine is that coarse (the "
+                "value is in millimetres)"
+            )
 
 
 def declared_accuracy(cli_sigma_mm: float | None, tracker_info: dict[str, Any] | None) -> Accuracy:
@@ -178,10 +192,11 @@ def implausible_estimates(
     units: Any,
     display_std: Any = None,
 ) -> tuple[str, ...]:
-    """Parameters whose estimate (in its display unit: "mm", "deg", "ppm"; a bool is read
-    as angle or not) exceeds the plausible size of its kind by more than three of its
-    standard errors (``display_std``, same units; None: by any amount)."""
+    """Parameters whose estimate (in its display unit: "mm", "deg", "ppm", a compliance's;
+    a bool is read as angle or not) exceeds the plausible size of its kind by more than three
+    of its standard errors (``display_std``, same units; None: by any amount)."""
     limits = {"mm": PLAUSIBLE_MM, "deg": PLAUSIBLE_DEG, "ppm": PLAUSIBLE_PPM}
+    limits.update(PLAUSIBLE_COMPLIANCE)
     out = []
     std = [0.0] * len(names) if display_std is None else list(display_std)
     for name, v, s, unit in zip(names, display_values, std, units, strict=True):

@@ -17,6 +17,7 @@ import numpy as np
 from calib.model import CalibrationModel
 from calib.position_error import PositionErrorStats, error_norms, stats_mm
 from calib.registration import Registration, initial_registration
+from twin.mechanism import Mechanism
 from twin.rigid_fit import fit_rigid_transform
 from twin.rotations import rotation_angle
 
@@ -39,6 +40,14 @@ class Side:
                 "max_deg": float(np.max(o)),
             }
         return out
+
+    def line(self, label: str) -> str:
+        """One printed line: ``label``, the 3D position error per reading, the orientation's."""
+        text = f"{label}: 3D position error per reading {self.position.describe()}"
+        if self.orientation_deg is not None:
+            o = self.orientation_deg
+            text += f"; orientation RMS {np.sqrt(np.mean(o * o)):.4f} deg, max {o.max():.4f} deg"
+        return text
 
 
 @dataclass(frozen=True)
@@ -87,11 +96,17 @@ def _orientation_deg(local: np.ndarray, measured: np.ndarray, predicted: np.ndar
     return np.degrees(rotation_angle(np.swapaxes(r_pred, -1, -2) @ r_meas))
 
 
-def _side(model: CalibrationModel, measured_base: np.ndarray, predicted: np.ndarray) -> Side:
+def score_side(mech: Mechanism, measured_base: np.ndarray, predicted: np.ndarray) -> Side:
+    """The errors of readings ``measured_base`` (P, T, 3) against a model's ``predicted``
+    targets: per reading, their statistics, and the tool's orientation error per pose."""
     norms = error_norms(measured_base, predicted)
-    local = model.nominal.target_local() if measured_base.shape[1] >= 3 else None
+    local = mech.target_local() if measured_base.shape[1] >= 3 else None
     ori = None if local is None else _orientation_deg(local, measured_base, predicted)
     return Side(stats_mm(norms), norms, ori)
+
+
+def _side(model: CalibrationModel, measured_base: np.ndarray, predicted: np.ndarray) -> Side:
+    return score_side(model.nominal, measured_base, predicted)
 
 
 def verify(

@@ -29,7 +29,12 @@ from calib.prior import (
 )
 from calib.rank_structure import describe, pose_probes, rank_correlations
 from calib.regularisation import PriorChoice, choose_prior, cut_label
-from calib.result_file import CalibrationResult, ResultFileError, correlation_pairs
+from calib.result_file import (
+    CalibrationResult,
+    ResultFileError,
+    correlation_pairs,
+    unusable_values,
+)
 from calib.verdict import (
     DEFAULT_MAX_RATIO,
     Accuracy,
@@ -38,6 +43,7 @@ from calib.verdict import (
     implausible_estimates,
     judge_fit,
 )
+from calib.verdict_notes import with_notes
 from calib.verify import Verification, verify
 from twin.exceptions import TwinError
 
@@ -109,7 +115,8 @@ def calibrate(
             scales=(None, 1.0),
         )
         choice = replace(choice, scale=1.0)
-        widths = np.where(np.asarray(model.params.is_gain, bool), np.inf, ranges)  # gains free
+        # gains and compliances free: the prior is on the geometry
+        widths = np.where(np.asarray(model.params.is_geometric, bool), ranges, np.inf)
         prior = Prior(widths, choice.noise_sigma_m)
         result = _identified(model, obs, unidentifiable, options, prior, False)
     try:
@@ -211,7 +218,9 @@ def judge(
     probes = pose_probes(obs.commands, model.nominal.actuator_names, pred.targets.mean(1), order)
     structure = rank_correlations(size, probes)
     noise = np.sqrt(3.0) * accuracy.sigma_mm
-    hints = tuple(_hints(model, obs)) if stats.rms_mm > 2.0 * noise else ()
+    # a data error shows as a residual above the noise, or (in a tracker's frame, where a
+    # registration and shrunken links can follow readings in metres) as implausible estimates
+    hints = tuple(_hints(model, obs)) if stats.rms_mm > 2.0 * noise or odd else ()
     verdict = judge_fit(
         stats.rms_mm,
         result.converged,
@@ -223,7 +232,7 @@ def judge(
         reach_mm=float(np.max(np.linalg.norm(pred.targets, axis=-1))) * 1e3,
         structure=describe(structure),
     )
-    return verdict, stats.as_dict(), structure
+    return with_notes(verdict, result, *obs.measured.shape[:2]), stats.as_dict(), structure
 
 
 def rejected_rows(run: CalibrationRun) -> list[dict[str, Any]]:
@@ -298,7 +307,7 @@ def prior_content(run: CalibrationRun) -> dict[str, Any] | None:
         return None
     ranges = physical_ranges(run.model.params, run.prior_spec)
     is_angle = np.asarray(run.model.params.is_angle, dtype=bool)
-    is_length = ~is_angle & ~np.asarray(run.model.params.is_gain, dtype=bool)
+    is_length = ~is_angle & np.asarray(run.model.params.is_geometric, dtype=bool)
     length = float(ranges[is_length][0]) * 1e3 * choice.scale if is_length.any() else None
     angle = float(np.degrees(ranges[is_angle][0])) * choice.scale if is_angle.any() else None
     return {
@@ -388,15 +397,18 @@ def verify_result(
         if loaded.registration is None:
             raise ResultFileError(f"{loaded.path}: tracker-frame result without registration")
         calibration = _calibration_set(model, loaded)
-    v = verify(
-        model,
-        values,
-        obs.commands,
-        obs.measured,
-        picked.pose_ids,
-        registration_after=loaded.registration,
-        calibration_set=calibration,
-    )
+    try:
+        v = verify(
+            model,
+            values,
+            obs.commands,
+            obs.measured,
+            picked.pose_ids,
+            registration_after=loaded.registration,
+            calibration_set=calibration,
+        )
+    except TwinError as exc:  # e.g. no closure at the result's values: name the odd ones
+        raise unusable_values(loaded, model.params, exc) from None
     return v, selection
 
 

@@ -22,6 +22,16 @@ def _shown(path: Path) -> str:
         return str(path)
 
 
+def _os_message(exc: OSError) -> str:
+    """What a file error says: ResultsWriteError's sentence, else its cause and file."""
+    from calib.write_set import WriteSetError
+    from scenarios.results_folder import ResultsWriteError, describe_os_error
+
+    if isinstance(exc, (ResultsWriteError, WriteSetError)):
+        return str(exc.strerror)
+    return describe_os_error(exc)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m scenarios", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -86,6 +96,9 @@ def main(argv: list[str] | None = None) -> int:
         # workspace, a rank-deficient plan): named, without a traceback; results untouched
         print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:  # a full disk, a read-only or immutable results folder
+        print(f"error: {_os_message(exc)}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as exc:
         where = getattr(exc, "out_dir", None)
         shown = f"{_shown(where)} left as it was" if where is not None else "nothing written"
@@ -115,6 +128,9 @@ def _sweep(args: argparse.Namespace) -> int:
     except EngineError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:  # a full disk, a read-only or immutable results folder
+        print(f"error: {_os_message(exc)}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted: finished runs kept; run again to resume", file=sys.stderr)
         return 130

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from twin.parameter_file import read_utf8
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCENARIO_DIR = Path(__file__).resolve().parent
 
@@ -365,7 +367,11 @@ def _check_truth(data: dict[str, Any], where: str) -> list[str]:
 
 # ----------------------------------------------------------------- the studies' schemas
 
-_COUNT = Key(int, required=True, min=1)
+# An upper bound on every count (poses, nodes, draws, repeats): 36 times the largest real
+# dataset seen (2773 poses) and ten times the paper's 10^4 Monte Carlo runs; a larger count
+# is a typo that would run for days or exhaust memory rather than an experiment
+MAX_COUNT = 100_000
+_COUNT = Key(int, required=True, min=1, max=MAX_COUNT)
 _NONNEG = Key(float, min=0)
 _POSITION_MM = Key(list, item=float, length=3)
 _HALF_WIDTH_MM = Key(list, required=True, item=float, length=2, above=0)
@@ -431,41 +437,30 @@ _ARM_PLAN = Table(
     required=True,
 )
 
-SCHEMAS: dict[str, Table] = {
-    "hexapod_paper": _base(
-        seed=_SEED,
-        truth=_truth(),
-        tracker=Table(
-            {
-                "position_mm": Key(list, required=True, item=float, length=3),
-                "noise": Key(str, required=True, check=_check_noise_spec),
-                "repeats": Key(int, min=1),
-            },
-            required=True,
-        ),
-        pose_noise=_POSE_NOISE,
-        plans=Table(
-            {"noise_free_poses": _COUNT, "few_poses": _COUNT, "many_poses": _COUNT},
-            required=True,
-        ),
-        verification=Table(
-            {
-                "nodes_per_axis": _COUNT,
-                "orientations_per_node": _COUNT,
-                "margin": Key(float, min=0, below=0.5),
-                "stroke_margin_mm": _NONNEG,
-            },
-            required=True,
-        ),
-    ),
-    "liu_vs_ols": _base(
+PLACEMENTS = ("interpolated", "extrapolated", "tilted")
+
+
+def _check_placements(value: list, where: str) -> list[str]:
+    out = [
+        f"'{where}[{i}]': " + unknown_name_message("placement", p, list(PLACEMENTS))
+        for i, p in enumerate(value)
+        if p not in PLACEMENTS
+    ]
+    if len(set(value)) != len(value):
+        out.append(f"'{where}' names a placement twice")
+    return out
+
+
+def _liu_vs_ols_keys() -> dict[str, Key | Table]:
+    """The keys of liu_vs_ols's plan and twin (its single run, draw study and regime map)."""
+    return dict(
         seed=_SEED,
         truth=_truth(effects=Key(list, check=_check_effects)),
         tracker=Table(
             {
                 "sigma_mm": Key(float, required=True, min=0),
                 "position_mm": Key(list, required=True, item=float, length=3),
-                "repeats": Key(int, min=1),
+                "repeats": Key(int, min=1, max=MAX_COUNT),
             },
             required=True,
         ),
@@ -486,19 +481,71 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
-        scoring=Table({"nodes_per_side": Key(int, min=1)}),
+        scoring=Table({"nodes_per_side": Key(int, min=1, max=MAX_COUNT)}),
+    )
+
+
+SCHEMAS: dict[str, Table] = {
+    "hexapod_paper": _base(
+        seed=_SEED,
+        truth=_truth(),
+        tracker=Table(
+            {
+                "position_mm": Key(list, required=True, item=float, length=3),
+                "noise": Key(str, required=True, check=_check_noise_spec),
+                "repeats": Key(int, min=1, max=MAX_COUNT),
+            },
+            required=True,
+        ),
+        pose_noise=_POSE_NOISE,
+        plans=Table(
+            {"noise_free_poses": _COUNT, "few_poses": _COUNT, "many_poses": _COUNT},
+            required=True,
+        ),
+        verification=Table(
+            {
+                "nodes_per_axis": _COUNT,
+                "orientations_per_node": _COUNT,
+                "margin": Key(float, min=0, below=0.5),
+                "stroke_margin_mm": _NONNEG,
+            },
+            required=True,
+        ),
+    ),
+    "liu_vs_ols": _base(
+        **_liu_vs_ols_keys(),
         # the single scenario needs it; the draw study (with [draws]) does without
-        monte_carlo=Table({"runs": Key(int, required=True, min=2)}),
+        monte_carlo=Table({"runs": Key(int, required=True, min=2, max=MAX_COUNT)}),
         # the draw study: the whole scenario over n truth draws (seeds seed, seed + 1, ...)
         draws=Table(
             {
-                "n": Key(int, required=True, min=1),
+                "n": Key(int, required=True, min=1, max=MAX_COUNT),
                 "estimators": Key(list, min_items=1, check=_check_estimators),
                 "engine": Key(str, choices=("ray", "local")),
             }
         ),
         # the loop after the fine calibration (diagnosis, effect, refit, compensation)
         loop=Table({"estimator": Key(str)}),
+    ),
+    # liu_vs_ols's plan and twin over a grid of tracker noise and test placements
+    "liu_regime": _base(
+        **_liu_vs_ols_keys(),
+        regime=Table(
+            {
+                "sigmas_mm": Key(list, required=True, item=float, min_items=1, above=0),
+                "placements": Key(
+                    list, required=True, item=str, min_items=1, check=_check_placements
+                ),
+                "draws": Key(int, required=True, min=1, max=MAX_COUNT),
+                "extrapolated_offset_mm": Key(float, above=0),
+                "extrapolated_side": Key(str, choices=("below", "above")),
+                "stroke_margin_mm": _NONNEG,
+                "tilt_deg": Key(list, item=float, length=2, min=0, below=90),
+                "tilt_seed": Key(int, min=0),
+                "engine": Key(str, choices=("ray", "local")),
+            },
+            required=True,
+        ),
     ),
     "optimal_poses": _base(
         seed=_SEED,
@@ -539,7 +586,7 @@ SCHEMAS: dict[str, Table] = {
             },
             required=True,
         ),
-        checks=Table({"fd_poses": Key(int, min=1)}),
+        checks=Table({"fd_poses": Key(int, min=1, max=MAX_COUNT)}),
         plan_comparison=Table(
             {
                 "plans": Key(
@@ -559,6 +606,14 @@ SCHEMAS: dict[str, Table] = {
         truth=Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
         tracker=_ARM_TRACKER,
         plan=_ARM_PLAN,
+        compensation=Table(
+            {
+                "desired_poses": _COUNT,
+                "joint_fraction": Key(float, required=True, above=0, max=1),
+                "stroke_margin_deg": Key(float, required=True, min=0),
+            },
+            required=True,
+        ),
         variants=Table(
             {
                 "three_reflectors": Table(
@@ -750,8 +805,8 @@ def _file_problems(scenario: Scenario, schema: Table) -> list[str]:
 
 def _toml(path: Path) -> dict[str, Any] | None:
     try:
-        return tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return tomllib.loads(read_utf8(path))
+    except (OSError, UnicodeError, tomllib.TOMLDecodeError):
         return None
 
 
@@ -791,10 +846,10 @@ def load_scenario(name_or_path: str) -> Scenario:
     """Read and validate a scenario against its study's schema; nothing runs before this."""
     path = find_scenario(name_or_path)
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(read_utf8(path))  # UTF-8; a byte-order mark is accepted
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path} is not valid TOML: {exc}") from exc
-    except (OSError, UnicodeDecodeError) as exc:
+    except (OSError, UnicodeError) as exc:
         raise ScenarioError(f"{path} cannot be read: {exc}") from exc
     study = data.get("study")
     if not isinstance(study, str):

@@ -9,8 +9,11 @@ side sees only the nominal model, the error model and tracker readings of the ga
 3. the loop (scenarios.liu_vs_ols_loop): residual diagnosis after the fine OLS, the named
    effect added to the model, full nonlinear refit, compensation by fixed-point inversion;
 4. compensation of the NC poses by the predicted pose error twist (Eq. 16), re-measured on
-   the truth twin at every node of the calibration layers and of the test (middle) layer;
-5. Monte Carlo of the fine estimate (Eqs. 17-18) over noise draws sharing one H.
+   the truth twin at every node of the calibration layers and of the test (middle) layer,
+   every stage on the same machine state (scenarios.liu_vs_ols_pipeline.score), with an
+   "OLS again" control scored last;
+5. Monte Carlo of the fine estimate (Eqs. 17-18) over noise draws sharing one H, eta at the
+   d the run used, and the test-layer error the noise alone leaves (scenarios.liu_vs_ols_noise).
 
 A scenario with a ``[draws]`` table is the draw study instead (scenarios.liu_vs_ols_draws).
 """
@@ -25,27 +28,25 @@ from typing import Any
 import numpy as np
 
 from calib.compensation import TwistCompensation
-from calib.estimators.linear import DrawEstimator, draws
-from calib.estimators.liu import Liu
-from calib.estimators.liu_paper_units import LiuPaperUnits
-from calib.estimators.ols import OLS
-from calib.nominal_targets import nominal_targets
 from calib.orientation_reach import orientation_reach
 from scenarios.config import Scenario
 from scenarios.liu_vs_ols_loop import close_loop
+from scenarios.liu_vs_ols_noise import display_scale, eta_at_used, monte_carlo
 from scenarios.liu_vs_ols_pipeline import (
+    CONTROL,
     PAPER,
-    Bench,
-    Calibration,
+    PAPER_ROW_OF,
     calibrate,
     make_bench,
+    order_control_um,
     score,
     stage_commands,
+    with_control,
 )
 from scenarios.liu_vs_ols_recording import record
+from scenarios.liu_vs_ols_sentences import estimator_parameters
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
-from twin.kinematics_batch import forward_batch
 from twin.kinematics_fast import one_blas_thread
 from twin.parameters import KINDS, ParameterSet
 
@@ -53,14 +54,16 @@ from twin.parameters import KINDS, ParameterSet
 # the rows that do not depend on the estimator, coarse and OLS, position max and mean.
 POSITION_FACTOR = 1.5
 MATCHED_ROWS = ("coarse", "ols")
-MC_CHUNK = 2000  # Monte Carlo runs projected at once
+REGIME_STUDY = "liu_regime"  # the regime map, beside this scenario's results when run
+REGIME_GEOMETRY = "liu_regime_geometry"  # the same map on a geometry-only truth
 
 
 def paper_match(layers: dict[str, dict[str, dict[str, float]]]) -> dict[str, Any]:
-    """Ours / paper for every number of the coarse, OLS and Liu rows (all three layers)."""
+    """Ours / paper for every number of the coarse, OLS and Liu rows (all three layers; the
+    paper's Liu row against its own estimator, ``liu_paper_deg``)."""
     out: dict[str, Any] = {"position_factor": POSITION_FACTOR, "rows": {}}
     for stage, paper in PAPER["table5"].items():
-        ours = layers["all"].get(stage)
+        ours = layers["all"].get(PAPER_ROW_OF[stage])
         if ours is None:
             continue
         ratios = {q: ours[q] / v for q, v in paper.items()}
@@ -75,35 +78,6 @@ def paper_match(layers: dict[str, dict[str, dict[str, float]]]) -> dict[str, Any
     return out
 
 
-def _monte_carlo(bench: Bench, cal: Calibration, runs: int, progress: Progress) -> dict:
-    """Eqs. 17-18: the spread of each estimator over noise draws on one truth and one H.
-
-    As the paper's simulation (section 5): the targets of the truth's geometry at the fine
-    plan (its effects left out: the simulation studies the measurement disturbance alone),
-    plus 10^4 draws of the tracker noise."""
-    params, problem = bench.machine.params, cal.problem
-    coarse_mech = bench.model.mechanism(cal.coarse.values)
-    commands = cal.fine_commands  # the fine plan's commands at the coarse settings
-    clean = forward_batch(bench.machine.truth, commands).targets
-    dp_clean = (clean - nominal_targets(coarse_mech, cal.fine_poses)).reshape(-1)
-    noise = bench.rng.normal(0.0, bench.sigma_m, size=(runs, dp_clean.size))
-    shown = params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
-    scale = np.diag(shown)  # SI -> mm/deg per kept parameter
-    estimators: dict[str, DrawEstimator] = {
-        "ols": OLS(),
-        "liu": Liu(),
-        "liu_k1": Liu(k=1.0),
-        "liu_paper_deg": LiuPaperUnits(angle_unit="deg", is_angle=problem.is_angle),
-        "liu_paper_rad": LiuPaperUnits(angle_unit="rad", is_angle=problem.is_angle),
-    }
-    # each run's estimate is its own; what the estimators share of a run (its products with
-    # the singular vectors of H, its OLS residual) is computed once, MC_CHUNK runs at a time
-    shared = draws(problem.h, dp_clean, noise, MC_CHUNK)
-    out = {label: est.fit_draws(shared) * scale for label, est in estimators.items()}
-    progress.counter("runs", runs, runs)
-    return {label: float(np.sqrt(np.sum(d.var(axis=0, ddof=1)))) for label, d in out.items()}
-
-
 def orientation_check(
     twists: np.ndarray, params: ParameterSet, layers: dict[str, dict[str, dict[str, float]]]
 ) -> dict[str, Any]:
@@ -115,7 +89,7 @@ def orientation_check(
     ).as_dict()
     rows = {}
     for stage, paper in PAPER["table5"].items():
-        ours = layers["all"].get(stage)
+        ours = layers["all"].get(PAPER_ROW_OF[stage])
         rows[stage] = {
             "paper_max_deg_per_mm": paper["ori_max_deg"] / paper["pos_max_mm"],
             "paper_mean_deg_per_mm": paper["ori_mean_deg"] / paper["pos_mean_mm"],
@@ -142,6 +116,21 @@ def draws_reference(out_dir: Path) -> dict[str, Any]:
     return {**d, "source": f"{DRAW_STUDY}/summary.json"}
 
 
+def regime_reference(out_dir: Path, name: str = REGIME_STUDY) -> dict[str, Any]:
+    """The regime map's cells when it has been run into the same results root."""
+    path = out_dir.parent / name / "summary.json"
+    if not path.is_file():
+        return {"note": f"not run yet: make scenario NAME={name}"}
+    r = json.loads(path.read_text())
+    return {
+        "source": f"{name}/summary.json",
+        "cells": r.get("cells", {}),
+        "sigmas_mm": r.get("sigmas_mm"),
+        "placements": r.get("placements"),
+        "truth_effects": r.get("truth_effects", []),
+    }
+
+
 def run(
     scenario: Scenario,
     out_dir: Path,
@@ -161,8 +150,9 @@ def run(
     cal = calibrate(bench, scenario.get("fine.estimators", list), progress)
     problem, estimates = cal.problem, cal.estimates
     for m, (est, _) in estimates.items():
-        extra = f", {est.bias_parameter:.4g}" if est.bias_parameter is not None else ""
-        progress.note(f"{m}{extra}{'; ' + '; '.join(est.notes) if est.notes else ''}")
+        said = [estimator_parameters(est.bias_parameter, est.scale_parameter), *est.notes]
+        said = [t for t in said if t]
+        progress.note(f"{m}: {'; '.join(said)}" if said else m)
 
     progress.step("loop: residual diagnosis, the named effect in the model, nonlinear refit")
     t_loop = time.perf_counter()
@@ -186,13 +176,14 @@ def run(
         cmds[group] = stage_commands(bench, cal, p, comp=comps[group])
         near = (comps[group].qpos, comps[group].actuator_jacobians)
         cmds[group]["loop"] = lambda order, p=p, near=near: loop.commands(bench, p, order, near)
+        cmds[group] = with_control(cmds[group])  # "OLS again", scored last
+    scoring_start = bench.clock[0]
     with one_blas_thread():
-        layers, maps = score(bench, poses, cmds)
+        layers, maps = score(bench, poses, cmds)  # every stage from the same clock
 
+    maps = {g: {k: v for k, v in st.items() if k != CONTROL} for g, st in maps.items()}
     kept_names = [params.names[k] for k in problem.columns]
-    shown = np.diag(
-        params.to_display(np.eye(len(params)))[np.ix_(problem.columns, problem.columns)]
-    )
+    shown = display_scale(params, problem.columns)
     record(
         recorder,
         nominal,
@@ -206,11 +197,16 @@ def run(
 
     progress.step("Monte Carlo of the fine estimate (Eqs. 17-18)")
     runs = scenario.get("monte_carlo.runs", int)
+    test_b = comps["test"].twist_jacobians[:, :3, problem.columns]
     with one_blas_thread():  # 10^4 x 294 by 294 x 51 at most: one thread is as fast
-        spread = _monte_carlo(bench, cal, runs, progress)
+        noise = monte_carlo(bench, cal, runs, test_b)
+    progress.counter("runs", runs, runs)
+    spread = noise.spread
     sigma_ols, sigma_liu = spread["ols"], spread["liu"]
+    eta_used = eta_at_used(estimates, display_scale(params, problem.columns), bench.sigma_m)
 
     liu_est = estimates.get("liu", (None,))[0]
+    control_um = order_control_um(layers)
     summary: dict[str, Any] = {
         "scenario": scenario.name,
         "model": nominal.name,
@@ -222,15 +218,35 @@ def run(
         # d / k: 0 is ridge with Liu's k, 1 is OLS (the paper's d, whose k is 1)
         "liu_d": liu_est.bias_parameter / liu_est.scale_parameter if liu_est is not None else None,
         "liu_k": liu_est.scale_parameter if liu_est is not None else None,
+        "liu_bias_d": liu_est.bias_parameter if liu_est is not None else None,  # d itself
         "liu_notes": list(liu_est.notes) if liu_est is not None else [],
-        "eta_percent": (1.0 - sigma_liu / sigma_ols) * 100.0,
-        "eta_percent_liu_k1": (1.0 - spread["liu_k1"] / sigma_ols) * 100.0,
+        "eta_percent": noise.eta_percent("liu"),
+        "eta_percent_liu_k1": noise.eta_percent("liu_k1"),
+        # eta with d and k fixed at the values this run chose (analytic; Eq. 17 for each)
+        "eta_at_used_d_percent": eta_used,
+        # the test-layer pose error the tracker noise alone leaves after each estimator (um;
+        # mean over the Monte Carlo runs of the test layer's mean and max): OLS's is the
+        # ceiling of any shrinkage gain
+        "noise_only_test_um": {
+            label: {"mean": noise.test_mean_um[label], "max": noise.test_max_um[label]}
+            for label in noise.spread
+        },
+        "scoring": {
+            "clock": "same",
+            "start_pose": scoring_start,
+            "order_control_um": control_um,
+            "order_control_all_um": order_control_um(layers, "all"),
+            "note": "every stage of every layer measured from the same clock (the same "
+            "thermal state); 'ols_again' is OLS's commands scored after every other stage",
+        },
+        "tracker_sigma_mm": bench.sigma_m * 1e3,
         "truth_effects": [e.name for e in bench.effects],
         "truth_random": scenario.section("truth").get("random"),
         "paper_units": {
             "note": "the paper's Eq. 11 literally (k = 1) on H in mm and deg; mm and rad beside",
-            "eta_percent": (1.0 - spread["liu_paper_deg"] / sigma_ols) * 100.0,
-            "eta_percent_rad": (1.0 - spread["liu_paper_rad"] / sigma_ols) * 100.0,
+            "sigma2": "RSS / n (Eq. 13)",
+            "eta_percent": noise.eta_percent("liu_paper_deg"),
+            "eta_percent_rad": noise.eta_percent("liu_paper_rad"),
             "layers": {
                 group: {"liu": stages.get("liu_paper_deg"), "liu_rad": stages.get("liu_paper_rad")}
                 for group, stages in layers.items()
@@ -244,8 +260,14 @@ def run(
         "orientation_reach": orientation_check(comps["test"].twist_jacobians, params, layers),
         "loop": loop.summary(),
         "draws": draws_reference(out_dir),
+        "regime": regime_reference(out_dir),
+        "regime_geometry": regime_reference(out_dir, REGIME_GEOMETRY),
         "estimators": {
-            m: {"bias_parameter": e.bias_parameter, "notes": list(e.notes)}
+            m: {
+                "bias_parameter": e.bias_parameter,
+                "scale_parameter": e.scale_parameter,
+                "notes": list(e.notes),
+            }
             for m, (e, _) in estimates.items()
         },
         "identifiable": kept_names,

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from scenarios.figures import plt, save_png
+from scenarios.liu_vs_ols_report import shown
 
 
 def draws_figure(out_dir: Path, results: list[dict[str, Any]], labels: list[str]) -> dict[str, str]:
@@ -17,7 +18,10 @@ def draws_figure(out_dir: Path, results: list[dict[str, Any]], labels: list[str]
         for lab in labels:
             diff = np.array([r["layers"]["test"][lab][q] for r in results]) - ols
             ax.hist(
-                diff * 1e3, bins=25, alpha=0.6, label=f"{lab} (median {np.median(diff) * 1e3:.2g})"
+                diff * 1e3,
+                bins=25,
+                alpha=0.6,
+                label=f"{shown(lab)} (median {np.median(diff) * 1e3:.2g})",
             )
         ax.axvline(0.0, color="k", lw=0.8)
         ax.set_xlabel(f"estimator - OLS, test layer {what} position error (um)")

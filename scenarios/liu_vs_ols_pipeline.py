@@ -1,14 +1,24 @@
-"""The liu_vs_ols pipeline in steps, shared by the single scenario and the draw study.
+"""The liu_vs_ols pipeline in steps, shared by the single scenario, the draw study and the
+regime map.
 
 The machine (truth twin with its effects, the tracker, the measurement sequence) is a
 :class:`Bench`; the calibration side sees only ``bench.measure`` (commands in, readings out)
 and the nominal model. Scoring uses ``bench.true_targets`` (where the targets really are).
+
+Fair scoring. The twin's time-dependent effects (thermal growth: a temperature that rises
+with every pose measured) would make a stage re-measured later meet a warmer machine, and
+the order of the stages would decide which estimator wins. :func:`score` therefore measures
+every stage of every group from the same clock: the machine as it stands when scoring
+begins, each stage's k-th pose at the same pose of the sequence (a careful experimenter
+lets the machine return to the same state, or interleaves the stages). An "OLS again"
+control (:data:`CONTROL`), OLS's commands scored once more after every other stage, shows
+that the order no longer matters: its error equals OLS's to round-off.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -54,6 +64,9 @@ PAPER: dict[str, Any] = {
     "n_source_errors": 145,
     "n_identifiable": 54,
 }
+# Our stage beside each row of the paper's Table 5: its Liu row is the paper's estimator
+# (Eq. 11 with k = 1 on H in mm and deg), not the Liu-type estimator with the HKB k.
+PAPER_ROW_OF = {"coarse": "coarse", "ols": "ols", "liu": "liu_paper_deg"}
 
 
 @dataclass
@@ -72,10 +85,21 @@ class Bench:
     z_layers: dict[str, float]
     clock: list[int] = field(default_factory=lambda: [0])  # poses measured so far
 
-    def run_machine(self, commands: np.ndarray):
-        """The truth twin with its effects, at the next poses of the measurement sequence."""
-        order = self.clock[0] + np.arange(len(commands))
-        self.clock[0] += len(commands)
+    def _order(self, n: int, order: np.ndarray | None) -> np.ndarray:
+        """The poses' places in the measurement sequence: the next ``n`` poses, or ``order``
+        as given (scoring from a fixed clock); the clock then stands after the latest."""
+        if order is None:
+            order = self.clock[0] + np.arange(n)
+        order = np.asarray(order, dtype=int)
+        if order.shape != (n,):
+            raise ValueError(f"{n} commands but an order of shape {order.shape}")
+        self.clock[0] = max(self.clock[0], int(order.max(initial=-1)) + 1)
+        return order
+
+    def run_machine(self, commands: np.ndarray, order: np.ndarray | None = None):
+        """The truth twin with its effects, at the next poses of the measurement sequence
+        (or at the places ``order`` gives)."""
+        order = self._order(len(commands), order)
         return twin_measure(
             self.machine.truth, commands, self.tracker, self.rng, effects=self.effects, order=order
         )
@@ -89,12 +113,13 @@ class Bench:
             )
         return self.run_machine(commands).readings.mean(axis=2)
 
-    def true_targets(self, commands: np.ndarray) -> np.ndarray:
-        """Where the targets really are (no tracker noise), for scoring."""
+    def true_targets(self, commands: np.ndarray, order: np.ndarray | None = None) -> np.ndarray:
+        """Where the targets really are (no tracker noise), for scoring; ``order``: the
+        poses' places in the measurement sequence (default: the next ones)."""
         if not self.effects:
-            self.clock[0] += len(commands)
+            self._order(len(commands), order)
             return forward_batch(self.machine.truth, commands).targets
-        return self.run_machine(commands).true_targets
+        return self.run_machine(commands, order).true_targets
 
     def poses(self, group: str, nodes: int) -> np.ndarray:
         heights = {
@@ -229,22 +254,52 @@ def stage_commands(
     return out
 
 
+CONTROL = "ols_again"  # OLS's commands scored once more, after every other stage
+Clock = Literal["same", "sequential"]
+
+
+def with_control(stage_cmds: dict[str, Any], reference: str = "ols") -> dict[str, Any]:
+    """The stages with the "OLS again" control appended last (the reference's commands)."""
+    if reference not in stage_cmds:
+        return dict(stage_cmds)
+    return {**stage_cmds, CONTROL: stage_cmds[reference]}
+
+
+def order_control_um(layers: dict[str, dict[str, dict[str, float]]], group: str = "test") -> float:
+    """Mean position error of the "OLS again" control minus OLS's in ``group``, um: zero
+    to round-off when every stage is scored on the same machine state."""
+    g = layers[group]
+    return (g[CONTROL]["pos_mean_mm"] - g["ols"]["pos_mean_mm"]) * 1e3
+
+
 def score(
-    bench: Bench, poses: dict[str, np.ndarray], cmds: dict[str, dict[str, np.ndarray]]
+    bench: Bench,
+    poses: dict[str, np.ndarray],
+    cmds: dict[str, dict[str, np.ndarray]],
+    clock: Clock = "same",
 ) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, dict[str, Any]]]:
     """Re-measure every stage's commands on the truth: stats per group, and the error maps.
 
-    ``poses[group]`` and ``cmds[group][stage]`` for the groups "calibration" and "test"; the
-    group "all" is the union of both (the paper's three layers), not measured again."""
+    ``poses[group]`` and ``cmds[group][stage]`` for any groups (the liu_vs_ols study's are
+    "calibration" and "test"; the group "all" is then the union of both, the paper's three
+    layers, not measured again). ``clock="same"`` (fair scoring) measures every stage of
+    every group from the clock at which scoring begins, so a time-dependent effect is the
+    same for each; ``"sequential"`` measures one stage after the other as the sequence runs
+    on (the machine warmer for each later stage: only to show what that does)."""
+    if clock not in ("same", "sequential"):
+        raise ValueError(f"clock must be 'same' or 'sequential', got {clock!r}")
     layers: dict[str, dict[str, dict[str, float]]] = {}
     maps: dict[str, dict[str, tuple[np.ndarray, PoseErrors]]] = {}
     local = bench.machine.nominal.target_local()
+    start = bench.clock[0]
     for group, stage_cmds in cmds.items():
         layers[group], maps[group] = {}, {}
         for stage, c in stage_cmds.items():
+            first = start if clock == "same" else bench.clock[0]
+            order = first + np.arange(len(poses[group]))
             if callable(c):  # commands that depend on when they are run: c(order)
-                c = c(bench.clock[0] + np.arange(len(poses[group])))
-            errs = pose_errors(poses[group], bench.true_targets(c), local)
+                c = c(order)
+            errs = pose_errors(poses[group], bench.true_targets(c, order), local)
             layers[group][stage] = max_mean_stats(errs)
             maps[group][stage] = (poses[group], errs)
     if "calibration" in maps and "test" in maps:

@@ -1,9 +1,21 @@
-"""report.md of the liu_vs_ols study: our Table 5 beside the paper's, eta, the loop, the draws."""
+"""report.md of the liu_vs_ols study: our Table 5 beside the paper's, eta, the loop, the draws.
+
+The sentences that judge the run are made from its numbers (scenarios.liu_vs_ols_sentences).
+"""
 
 from __future__ import annotations
 
 import math
 from typing import Any
+
+from scenarios.liu_vs_ols_sentences import (
+    effects_phrase,
+    estimator_parameters,
+    eta_sentences,
+    loop_sentence,
+    reproduction_sentences,
+    scoring_sentences,
+)
 
 ORDER = (
     "uncalibrated",
@@ -17,8 +29,29 @@ ORDER = (
     "ridge",
     "pcr",
     "loop",
+    "ols_again",
 )
-PAPER_ROW = {"coarse": "coarse", "ols": "ols", "liu": "liu", "liu_paper_deg": "liu"}
+PAPER_ROW = {"coarse": "coarse", "ols": "ols", "liu_paper_deg": "liu"}
+# How the tables name a stage: the Liu-type estimator with the HKB k is not the paper's Liu.
+SHOWN = {
+    "liu": "liu (HKB k)",
+    "liu_k1": "liu_k1 (k = 1, scaled H)",
+    "liu_paper_deg": "liu_paper_deg (paper's Liu)",
+    "liu_cv": "liu_cv (k, d by CV)",
+    "ols_again": "ols_again (control)",
+}
+
+
+def shown(stage: str) -> str:
+    return SHOWN.get(stage, stage)
+
+
+def paper_row(row: str) -> str:
+    """A row of the paper's Table 5 and the stage of ours set beside it."""
+    ours = {v: k for k, v in PAPER_ROW.items()}.get(row, row)
+    return row if ours == row else f"{row} (ours: {ours})"
+
+
 GROUP_TITLE = {
     "all": "all three layers (as the paper's Table 5)",
     "test": "test layer (middle, z = 0)",
@@ -42,7 +75,7 @@ def _table(group: str, stages: dict[str, dict[str, float]], paper: dict[str, Any
         v = stages[stage]
         p = paper["table5"].get(PAPER_ROW.get(stage, ""), {})
         lines.append(
-            f"| {stage} | {v['pos_max_mm']:.4f} | {v['pos_mean_mm']:.4f} | "
+            f"| {shown(stage)} | {v['pos_max_mm']:.4f} | {v['pos_mean_mm']:.4f} | "
             f"{v['ori_max_deg']:.4f} | {v['ori_mean_deg']:.4f} | "
             + " | ".join(
                 _f(p.get(q), ".3f")
@@ -68,31 +101,10 @@ def _match(s: dict[str, Any]) -> list[str]:
     for stage, r in m["rows"].items():
         q = r["ratio"]
         lines.append(
-            f"| {stage} | {q['pos_max_mm']:.2f} | {q['pos_mean_mm']:.2f} | "
+            f"| {paper_row(stage)} | {q['pos_max_mm']:.2f} | {q['pos_mean_mm']:.2f} | "
             f"{q['ori_max_deg']:.2f} | {q['ori_mean_deg']:.2f} |"
         )
     return [*lines, ""]
-
-
-def _why(s: dict[str, Any]) -> list[str]:
-    t = s["layers"]["test"]
-    gain = (1.0 - t["liu"]["pos_mean_mm"] / t["ols"]["pos_mean_mm"]) * 100.0
-    return [
-        "## Does the paper's Liu gain reproduce?",
-        "",
-        f"No. On the test layer Liu changes the OLS mean position error by {-gain:+.1f} % "
-        "(paper: -14 %, 0.035 -> 0.030 mm; max 0.092 -> 0.056 mm). Liu shrinks the estimate "
-        "along the badly determined directions of H, which lowers the part of the error that "
-        "the tracker noise puts into the estimate (its variance: eta above). Here that part "
-        "is small: with sigma = 0.005 mm and 98 poses the noise leaves about 0.008 mm "
-        "(the geometry-only scenario), while the OLS row of the paper's regime, 0.035 mm, is "
-        "set by effects no geometric parameter describes (lost motion, thermal drift, lead "
-        f"error). Their error is a bias that shrinkage cannot remove; the HKB k (k = "
-        f"{s['liu_k']:.3g}) sees a well-conditioned scaled problem and leaves Liu at OLS, and "
-        "the paper's k = 1 in mm and deg shrinks without a gain in the poses. The loop row "
-        "shows what does lower the error: naming the effect and modelling it.",
-        "",
-    ]
 
 
 def _orientation(s: dict[str, Any]) -> list[str]:
@@ -128,7 +140,8 @@ def _orientation(s: dict[str, Any]) -> list[str]:
     ]
     for stage, v in r["rows"].items():
         lines.append(
-            f"| {stage} | {v['paper_max_deg_per_mm']:.2f} | {v['paper_mean_deg_per_mm']:.2f} | "
+            f"| {paper_row(stage)} | {v['paper_max_deg_per_mm']:.2f} | "
+            f"{v['paper_mean_deg_per_mm']:.2f} | "
             f"{_f(v['ours_max_deg_per_mm'], '.3f')} | {_f(v['ours_mean_deg_per_mm'], '.3f')} |"
         )
     lines += [
@@ -158,7 +171,7 @@ def _loop(s: dict[str, Any]) -> list[str]:
             else "with no effect to model: the nonlinear refit of the geometry alone"
         )
         + f" (Levenberg-Marquardt, {lp['lm_iterations']} iterations); noise floor sqrt(3) "
-        f"sigma = {lp['noise_floor_rms_mm']:.4f} mm (3D RMS per reading).",
+        f"sigma = {lp['noise_floor_rms_mm']:.4f} mm (3D RMS per reading). " + loop_sentence(s),
         "",
         "| coefficient | value (SI) | std (SI) |",
         "|---|---|---|",
@@ -172,21 +185,41 @@ def _draws_ref(d: dict[str, Any]) -> list[str]:
     lines = ["## Liu against OLS over many truths", ""]
     if not d.get("n"):
         return [*lines, d.get("note", "not run"), ""]
-    m = d["liu_minus_ols_test_pos_mean_mm"]
-    return [
-        *lines,
-        f"From the draw study ({d.get('source', '')}): {d['n']} truth draws; Liu - OLS test-layer "
-        f"mean position error median {m['median'] * 1e3:.3g} um (5-95 %: {m['p05'] * 1e3:.3g} .. "
-        f"{m['p95'] * 1e3:.3g} um); Liu better in {d['liu_better_fraction'] * 100:.0f} % of draws."
-        + (
-            f" Liu with k and d by cross-validation (liu_cv): median "
-            f"{d['liu_cv_minus_ols_test_pos_mean_mm']['median'] * 1e3:.3g} um, better in "
-            f"{d['liu_cv_better_fraction'] * 100:.0f} % of draws."
-            if d.get("liu_cv_minus_ols_test_pos_mean_mm")
-            else ""
-        ),
-        "",
+    said = [
+        f"From the draw study ({d.get('source', '')}), {d['n']} truth draws, every stage "
+        "scored on the same machine state; estimator minus OLS in the test layer's mean "
+        "position error:"
     ]
+    for label in ("liu_paper_deg", "liu", "liu_cv"):
+        m = d.get(f"{label}_minus_ols_test_pos_mean_mm")
+        if m:
+            said.append(
+                f"`{shown(label)}` median {m['median'] * 1e3:+.3g} um (5-95 %: "
+                f"{m['p05'] * 1e3:+.3g} .. {m['p95'] * 1e3:+.3g} um), better in "
+                f"{d[f'{label}_better_fraction'] * 100:.0f} % of draws;"
+            )
+    return [*lines, " ".join(said).rstrip(";") + ".", ""]
+
+
+def truth_text(random: Any) -> str:
+    """The drawn source errors as a reader reads them (not a Python dict)."""
+    if not isinstance(random, dict):
+        return "from the scenario's values file"
+    units = {
+        "translation_mm": "mm",
+        "rotation_deg": "deg",
+        "encoder_mm": "mm",
+        "encoder_deg": "deg",
+    }
+    words = {
+        "translation_mm": "translations",
+        "rotation_deg": "rotations",
+        "encoder_mm": "linear encoder offsets",
+        "encoder_deg": "angular encoder offsets",
+    }
+    kind = random.get("distribution", "uniform")
+    parts = [f"{words[k]} +-{random[k]:g} {units[k]}" for k in words if k in random]
+    return f"drawn {kind} ({', '.join(parts)})"
 
 
 def _report_draws(s: dict[str, Any]) -> str:
@@ -197,8 +230,12 @@ def _report_draws(s: dict[str, Any]) -> str:
         f"{d['n']} truth draws (seeds {d['seeds'][0]}..{d['seeds'][1]}), effects "
         f"{', '.join(s['truth_effects']) or 'none'}; engine {s['engine']}; runtime "
         f"{s['runtime_s']:.0f} s. Differences in um, estimator minus OLS (below 0: better "
-        "than OLS); 'better' is the fraction of draws with a lower mean position error.",
+        "than OLS); 'better' is the fraction of draws with a lower mean position error. "
+        "`liu_paper_deg` is the paper's estimator (Eq. 11 with k = 1 on H in mm and deg, d from "
+        "Eq. 14, sigma^2 = RSS / n as Eq. 13 writes it); `liu` is the Liu-type estimator with "
+        "the Hoerl-Kennard-Baldwin k on the column-scaled H (not the paper's).",
         "",
+        *_draws_scoring(s),
         "| layers | estimator | mean: median | p05 | p95 | max: median | p05 | p95 "
         "| better (mean) | better (max) |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -209,7 +246,7 @@ def _report_draws(s: dict[str, Any]) -> str:
                 continue
             a, b = e["minus_ols_pos_mean_mm"], e["minus_ols_pos_max_mm"]
             lines.append(
-                f"| {g} | {est} | {a['median'] * 1e3:.3g} | {a['p05'] * 1e3:.3g} | "
+                f"| {g} | {shown(est)} | {a['median'] * 1e3:.3g} | {a['p05'] * 1e3:.3g} | "
                 f"{a['p95'] * 1e3:.3g} | {b['median'] * 1e3:.3g} | {b['p05'] * 1e3:.3g} | "
                 f"{b['p95'] * 1e3:.3g} | {e['better_fraction']:.2f} | "
                 f"{e['better_fraction_max']:.2f} |"
@@ -225,9 +262,9 @@ def _report_draws(s: dict[str, Any]) -> str:
     paper = s["paper"]["table5"]
     for est, e in d["groups"]["all"].items():
         mx, mn = e["pos_max_mm"], e["pos_mean_mm"]
-        p = paper.get(est, {})
+        p = paper.get(PAPER_ROW.get(est, ""), {})
         lines.append(
-            f"| {est} | {mx['median']:.4f} ({mx['p05']:.4f}..{mx['p95']:.4f}) | "
+            f"| {shown(est)} | {mx['median']:.4f} ({mx['p05']:.4f}..{mx['p95']:.4f}) | "
             f"{mn['median']:.4f} ({mn['p05']:.4f}..{mn['p95']:.4f}) | "
             f"{_f(p.get('pos_max_mm'), '.3f')} | {_f(p.get('pos_mean_mm'), '.3f')} |"
         )
@@ -245,27 +282,57 @@ def _report_draws(s: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _draws_scoring(s: dict[str, Any]) -> list[str]:
+    sc = s.get("scoring")
+    if not sc:
+        return []
+    c = sc["order_control_um"]
+    return [
+        "Every stage of a draw was scored from the same clock (its machine state); the "
+        f"control 'ols_again' (OLS scored after every other stage) differs from OLS by at "
+        f"most {c:.3g} um in the test layer's mean over the draws"
+        + (": within round-off." if c < 0.05 else ": NOT within round-off."),
+        "",
+    ]
+
+
 def report(s: dict[str, Any]) -> str:
     if s.get("study") == "liu_vs_ols_draws":
         return _report_draws(s)
     paper = s["paper"]
-    pu = s["paper_units"]
+    est = s.get("estimators", {})
+    liu_dk = estimator_parameters(s.get("liu_bias_d"), s.get("liu_k"))
+    paper_dk = estimator_parameters(
+        est.get("liu_paper_deg", {}).get("bias_parameter"),
+        est.get("liu_paper_deg", {}).get("scale_parameter"),
+    )
+    effects = s["truth_effects"]
     lines = [
         "# Hybrid polisher: coarse then fine calibration, Liu against OLS",
         "",
-        f"Truth: source errors {s.get('truth_random')}; effects "
-        f"{', '.join(s['truth_effects']) or 'none (geometry only)'}. Source errors: "
-        f"{s['n_source_errors']} (paper: {paper['n_source_errors']}); identifiable from the fine "
-        f"plan (Steps 1-3): {s['n_identifiable']} (paper: {paper['n_identifiable']}). Coarse "
-        f"calibration: {s['coarse_iterations']} rounds (converged: {s['coarse_converged']}). "
-        f"Liu d/k = {s['liu_d']:.3g} (k = {s['liu_k']:.3g}). Runtime {s['runtime_s']:.1f} s.",
+        f"Truth: source errors {truth_text(s.get('truth_random'))}; effects "
+        + (
+            f"{', '.join(effects)} ({effects_phrase(effects)})"
+            if effects
+            else "none (geometry only)"
+        )
+        + f". Source errors: {s['n_source_errors']} (paper: {paper['n_source_errors']}); "
+        f"identifiable from the fine plan (Steps 1-3): {s['n_identifiable']} (paper: "
+        f"{paper['n_identifiable']}). Coarse calibration: {s['coarse_iterations']} rounds "
+        f"(converged: {s['coarse_converged']}). Runtime {s['runtime_s']:.1f} s.",
         "",
-        "Estimators: `liu` is the Liu-type estimator with the unit-free Hoerl-Kennard-Baldwin "
-        "scale k and the MSE-optimal d (Eq. 14 generalised) on the column-scaled H; `liu_k1` is "
-        "Eq. 11 with k = 1 on the scaled H; `liu_paper_deg` / `liu_paper_rad` are Eq. 11 "
-        "literally (k = 1) on H in the paper's units, mm and deg or mm and rad; `loop` is the "
-        "fine OLS followed by the diagnosed effect (below).",
+        "Estimators: `liu_paper_deg` is the paper's Liu estimator, Eq. 11 literally (k = 1) on H "
+        "in mm and deg, d from Eq. 14 with sigma^2 = RSS / n (Eq. 13)"
+        + (f": {paper_dk}" if paper_dk else "")
+        + "; `liu_paper_rad` the same in mm and rad. `liu` (HKB k) is the Liu-type estimator "
+        "with the unit-free Hoerl-Kennard-Baldwin scale k and the MSE-optimal d (Eq. 14 "
+        "generalised) on the column-scaled H"
+        + (f": {liu_dk}" if liu_dk else "")
+        + "; `liu_k1` is Eq. 11 with k = 1 on the scaled H. `loop` is the fine OLS followed by "
+        "the diagnosed effect (below); `ols_again` (control) is OLS's commands scored once "
+        "more after every other stage.",
         "",
+        *scoring_sentences(s),
         "## Pose errors (true pose of the head at every node), paper's Table 5 beside",
         "",
     ]
@@ -274,20 +341,9 @@ def report(s: dict[str, Any]) -> str:
             lines += _table(group, s["layers"][group], paper)
     if "paper_match" in s:
         lines += _match(s)
-    lines += _why(s) if s.get("truth_effects") else []
+    lines += reproduction_sentences(s)
     lines += _orientation(s)
-    lines += [
-        "## Robustness against measurement noise (Eqs. 17-18)",
-        "",
-        f"{s['monte_carlo_runs']} noise draws (sigma = 0.005 mm per target coordinate) on the "
-        "fixed truth's geometry (as the paper's simulation: the effects left out): overall "
-        f"standard deviation OLS {s['sigma_ols']:.4g}, Liu "
-        f"{s['sigma_liu']:.4g} (mm and deg summed as the paper does). eta: Liu (HKB k) "
-        f"{s['eta_percent']:.1f} %, k = 1 on the scaled H {s['eta_percent_liu_k1']:.1f} %, "
-        f"the paper's Eq. 11 in mm and deg {pu['eta_percent']:.1f} %, in mm and rad "
-        f"{pu['eta_percent_rad']:.1f} % (paper: {paper['eta_percent']} %).",
-        "",
-    ]
+    lines += eta_sentences(s)
     if "loop" in s:
         lines += _loop(s)
     if "draws" in s:

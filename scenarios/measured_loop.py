@@ -24,47 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from calib.dataset import Dataset, write_dataset
+from calib.dataset import write_dataset
 from scenarios.config import Scenario
 from scenarios.machine_setup import build_effects
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.serial_arm import _cli, _joints, _tracker
 from scenarios.truth_draw import TruthSpec, draw_truth
-from twin.measurement import measure
+from scenarios.twin_datasets import tracker_frame_dataset
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
-from twin.tracker import Tracker
-
-
-def measured_dataset(
-    truth: Mechanism,
-    tracker: Tracker,
-    commands: np.ndarray,
-    n_cal: int,
-    sigma_mm: float,
-    rng: np.random.Generator,
-    effects: list,
-    notes: str,
-) -> Dataset:
-    """What the tracker exports of the truth with its effects: readings in the tracker's
-    own frame, a set column (calibration then test rows), the declared accuracy."""
-    n = len(commands)
-    m = measure(truth, commands, tracker, rng, effects=effects)
-    return Dataset(
-        model=truth.name,
-        frame="tracker",
-        actuator_names=truth.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
-        target_names=truth.target_names,
-        pose_ids=np.arange(1, n + 1),
-        sets=np.array(["calibration"] * n_cal + ["test"] * (n - n_cal)),
-        commands=commands,
-        readings=tracker.in_own_frame(m.readings),
-        order=np.arange(n),
-        tracker={"noise": tracker.noise.describe(), "sigma_mm": sigma_mm},
-        notes=notes,
-    )
 
 
 def _verified(common: list[str], result: Path, out: Path, log: Path) -> tuple[int, dict]:
@@ -92,7 +61,7 @@ def run(
     sigma_mm = scenario.get("tracker.sigma_mm", float)
     progress.step(f"measure {n_cal} + {n_test} poses with {[e.name for e in effects]}")
     data = write_dataset(
-        measured_dataset(
+        tracker_frame_dataset(
             truth,
             _tracker(scenario),
             commands,
@@ -100,7 +69,8 @@ def run(
             sigma_mm,
             rng,
             effects,
-            "twin: a cobot-like arm, compliant joints under a payload, tracker in its own frame",
+            notes="twin: a cobot-like arm, compliant joints under a payload, tracker in its "
+            "own frame",
         ),
         out_dir / "readings.csv",
     )
@@ -136,6 +106,7 @@ def run(
             "test": diag.get("test"),
             "static": diag["effect"]["static"],
             "not_static": diag["effect"]["not_static"],
+            "not_static_reasons": diag["effect"]["not_static_reasons"],
         },
     }
     if diag["effect"]["added_parameters"]:
@@ -158,7 +129,15 @@ def run(
             common, with_result, out_dir / "verify_with_effect.json", out_dir / "verify_with.log"
         )
         summary["exit_codes"].update(identify_with=code_with, verify_with=code_vw)
-        summary["with_effect"] = {"test": {"before": ver_w["before"], "after": ver_w["after"]}}
+        refit = json.loads(with_result.read_text()) if with_result.is_file() else {}
+        added = [a["name"] for a in diag["effect"]["added_parameters"]]
+        summary["with_effect"] = {
+            "test": {"before": ver_w.get("before"), "after": ver_w.get("after")},
+            "verdict": refit.get("verdict"),
+            "parameters": {
+                n: refit["parameters"][n] for n in added if n in refit.get("parameters", {})
+            },
+        }
     summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report("measured_loop", summary)
     return summary

@@ -29,12 +29,27 @@ def _diagnosis_sentence(s: dict[str, Any]) -> str:
         )
     tail = ""
     if d["not_static"]:
+        why = "; ".join(f"{n}: {r}" for n, r in d["not_static_reasons"].items())
         tail = (
-            f" {', '.join(d['not_static'])} is no static kind of the error model (it depends "
-            "on time, the direction of approach or a scanned shape): it stays the diagnosis's "
-            "own, and `identify --with` cannot add it."
+            f" It is no static kind of the error model ({why}): its before and after above "
+            "are the diagnosis's own, and `identify --with` cannot add it."
         )
     return f"The diagnosis names **{named}**: {d['reason']}.{held}{tail}"
+
+
+def _refit_sentence(w: dict[str, Any]) -> str:
+    params = w.get("parameters") or {}
+    shown = ", ".join(
+        f"{n} = {p['value']:.4g}"
+        + (f" +- {p['std']:.2g}" if p.get("std") is not None else "")
+        + f" {p['unit']}"
+        for n, p in params.items()
+    )
+    verdict = (w.get("verdict") or {}).get("message", "")
+    return (
+        f"**Identify --with.** The effect's parameters refitted with the geometry: {shown}. "
+        f"{verdict}"
+    )
 
 
 def report(s: dict[str, Any]) -> str:
@@ -70,6 +85,10 @@ def report(s: dict[str, Any]) -> str:
         "",
         "**Diagnose.** " + _diagnosis_sentence(s),
         "",
+    ]
+    if "with_effect" in s:
+        lines += [_refit_sentence(s["with_effect"]), ""]
+    lines += [
         f"Run time {s['runtime_s']:.1f} s.",
         "",
     ]

@@ -1,9 +1,12 @@
 """A rerun recording of a scenario: the machine, the targets, the errors, the estimates.
 
-Headless by default: the recording is saved to a ``.rrd`` file (``rec.save`` before any
-logging, ``rec.disconnect`` on ``close`` to write the footer); ``spawn_viewer`` also opens the
-viewer. A Recorder made with no path and no viewer does nothing, cheaply (rerun is not even
-imported). See docs/recordings.md for what each scenario's recording looks like.
+Headless by default: the recording is encoded in memory (``rec.binary_stream`` before any
+logging) and written to its ``.rrd`` file on ``close`` by Python, atomically, so that a full
+disk raises an OSError instead of stalling rerun's own file writer (it deadlocked after "No
+space left on device"); the flush waits at most FLUSH_TIMEOUT_S. ``spawn_viewer`` also opens
+the viewer (then rerun saves the file itself, as before). A Recorder made with no path and
+no viewer does nothing, cheaply (rerun is not even imported). See docs/recordings.md for
+what each scenario's recording looks like.
 
 A recording has one timeline at most, the poses' (rerun's own wall-clock timelines are off):
 the viewer plots and poses against the timeline selected, so a second one would be a face of
@@ -48,6 +51,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from calib.atomic_files import write_bytes_atomic
 from scenarios.recording_blueprints import (
     Bounds,
     ErrorMap,
@@ -75,6 +79,7 @@ from scenarios.recording_targets import (
 )
 from twin.mechanism import Mechanism
 
+FLUSH_TIMEOUT_S = 120.0  # encoding a recording of a few MB takes well under a second
 ERROR_MAP_RADIUS = 0.004  # metres
 NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
 PALETTE = [(220, 60, 50), (40, 110, 220), (40, 160, 80), (150, 80, 200), (230, 150, 30)]
@@ -109,6 +114,7 @@ class Recorder:
         self.enabled = self.path is not None or spawn_viewer
         self.logged = Logged()
         self._rec: Any = None
+        self._stream: Any = None
         self._want_blueprint = False
         self._home: dict[str, Mechanism] = {}  # machine -> its nominal mechanism
         if not self.enabled:
@@ -123,9 +129,11 @@ class Recorder:
         # where the views of data sent as columns (the poses) are empty
         self._rec.set_log_time_enabled(False)
         self._rec.set_log_tick_enabled(False)
-        if self.path is not None:
+        if self.path is not None and spawn_viewer:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path)
+        elif self.path is not None:
+            self._stream = self._rec.binary_stream()
         if spawn_viewer:
             self._rec.spawn()
 
@@ -138,11 +146,17 @@ class Recorder:
     def close(self) -> None:
         """Finish (series styles, the machine on the active timeline, the blueprint), flush
         and write the footer (a file without it cannot be read back)."""
-        if self._rec is not None:
+        if self._rec is None:
+            return
+        try:
             with self._checked():
                 self._finish()
+            if self._stream is not None:
+                data = self._stream.read(flush=True, flush_timeout_sec=FLUSH_TIMEOUT_S)
+                write_bytes_atomic(self.path, data or b"")
+        finally:
             self._rec.disconnect()
-            self._rec = None
+            self._rec = self._stream = None
 
     def _checked(self) -> contextlib.AbstractContextManager[Any]:
         if not self._strict:
@@ -505,6 +519,12 @@ class Recorder:
         doc = self.rr.TextDocument(viewer_markdown(markdown), media_type=self.rr.MediaType.MARKDOWN)
         self._rec.log(path, doc, static=True)
         self.logged.texts[path] = name or path.replace("_", " ")
+
+    @_active
+    def log_image(self, name: str, png: Path) -> None:
+        """A figure of the report (a PNG written beside the recording): :meth:`log_figure`
+        titled by its name."""
+        self.log_figure(name, png, name.replace("_", " "))
 
     @_active
     def log_loop(

@@ -236,13 +236,14 @@ def text_views(rrb: Any, log: Logged) -> Any | None:
     return views[0] if len(views) == 1 else rrb.Tabs(*views)
 
 
-def _plots(rrb: Any, views: list[Any]) -> Any | None:
-    """Figures and curves: side by side up to two, in tabs beyond."""
+def _plots(rrb: Any, views: list[Any], alone: bool) -> Any | None:
+    """Figures and curves: side by side up to two; beyond, in tabs beside a machine, or all
+    at once in a grid when they are the recording's only pictures (``alone``)."""
     if not views:
         return None
     if len(views) <= 2:
         return _row(rrb, views)
-    return rrb.Tabs(*views)
+    return rrb.Grid(*views, name="figures") if alone else rrb.Tabs(*views)
 
 
 def build_blueprint(log: Logged) -> Any:
@@ -253,7 +254,7 @@ def build_blueprint(log: Logged) -> Any:
 
     machine = machine_views(rrb, log)
     maps = error_map_views(rrb, log)
-    plots = _plots(rrb, figure_views(rrb, log) + series_views(rrb, log))
+    plots = _plots(rrb, figure_views(rrb, log) + series_views(rrb, log), not (machine or maps))
     left_parts, left_shares = [], []
     right_parts, right_shares = [], []
     if machine:

@@ -2,19 +2,15 @@
 
 A results folder is replaced whole or not at all: the run writes into a temporary sibling
 ``results/.<name>.partial-XXXX`` and only at the end swaps it in for ``results/<name>``. On any
-failure, Ctrl-C included, the temporary folder is removed and the previous results stay.
+failure, Ctrl-C included, the temporary folder is removed and the previous results stay; what
+a killed run left behind is recovered by the next run (:mod:`scenarios.results_folder`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import inspect
-import os
-import secrets
-import shutil
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +18,19 @@ from calib.atomic_files import write_json_atomic, write_text_atomic
 from scenarios.config import REPO_ROOT, Scenario, ScenarioError, load_scenario
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
+from scenarios.results_folder import KEPT, ResultsWriteError, replaced_whole
+
+__all__ = [
+    "KEPT",
+    "STUDIES",
+    "ResultsWriteError",
+    "RunInterrupted",
+    "replaced_whole",
+    "run_scenario",
+]
 
 StudyFn = Callable[[Scenario, Path, Progress, Recorder], dict[str, Any]]
 ReportFn = Callable[[dict[str, Any]], str]
-
-DIR_MODE = 0o755
 
 # study name -> (module with run(scenario, out_dir, progress), module with report(summary))
 STUDIES = {
@@ -36,6 +40,7 @@ STUDIES = {
         "scenarios.polisher_identifiability_report",
     ),
     "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
+    "liu_regime": ("scenarios.liu_regime", "scenarios.liu_regime_report"),
     "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
     "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
     "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
@@ -61,51 +66,6 @@ def _study(name: str) -> tuple[StudyFn, ReportFn]:
         importlib.import_module(run_module).run,
         importlib.import_module(report_module).report,
     )
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-KEPT = ("sweep",)  # subfolders of results/<name> that a plain run carries over
-
-
-@contextlib.contextmanager
-def replaced_whole(out_dir: Path) -> Iterator[Path]:
-    """Yield an empty temporary sibling of ``out_dir`` to write into; when the block ends
-    without an exception, it becomes ``out_dir`` (the previous folder renamed away, the new
-    one renamed into place, the old one deleted; a ``sweep/`` folder of earlier sweeps is
-    carried over). On any exception, KeyboardInterrupt included, the temporary folder is
-    removed and ``out_dir`` is left untouched."""
-    root = out_dir.parent
-    root.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=root))
-    try:
-        os.chmod(tmp, DIR_MODE & ~_umask())  # mkdtemp makes 0700; results are ordinary
-        yield tmp
-        for keep in KEPT:  # a sweep's runs are not this run's output: they stay
-            if (out_dir / keep).is_dir() and not (tmp / keep).exists():
-                os.rename(out_dir / keep, tmp / keep)
-        old = None
-        if out_dir.exists() or out_dir.is_symlink():
-            old = root / f".{out_dir.name}.old-{secrets.token_hex(4)}"
-            os.rename(out_dir, old)
-        try:
-            os.rename(tmp, out_dir)
-        except BaseException:
-            if old is not None:
-                os.rename(old, out_dir)
-            raise
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if old is not None:
-        if old.is_dir() and not old.is_symlink():
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            old.unlink(missing_ok=True)
 
 
 def run_scenario(

@@ -8,8 +8,9 @@ calibration and a test set, then runs the user's commands on it, in process:
     python -m calib identify --model M --errors E --data D --set calibration --out R.json
     python -m calib verify   --model M --errors E --result R.json --data D --set test --out V.json
 
-once with one reflector (positions only) and once with three. The numbers come from the
-files those commands write.
+once with one reflector (positions only) and once with three, then closes the loop through
+``compensate``, ``export`` and ``verify`` of the exported model (scenarios.serial_arm_loop).
+The numbers come from the files those commands write.
 """
 
 from __future__ import annotations
@@ -24,13 +25,15 @@ from typing import Any
 import numpy as np
 
 from calib.__main__ import main as calib_main
-from calib.dataset import Dataset, write_dataset
+from calib.dataset import write_dataset
 from calib.registration import Registration
 from calib.result_file import load_result
 from scenarios.config import Scenario, ScenarioError
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
+from scenarios.serial_arm_loop import close_the_loop
 from scenarios.truth_draw import TruthSpec, draw_truth
+from scenarios.twin_datasets import tracker_frame_dataset
 from twin.kinematics_batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameter_file import load_parameter_set
@@ -50,28 +53,6 @@ def _joints(mech: Mechanism, n: int, fraction: float, rng: np.random.Generator) 
     lo, hi = mech.actuator_range.T
     mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
     return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
-
-
-def _dataset(
-    truth: Mechanism, tracker: Tracker, commands: np.ndarray, n_cal: int, sigma_mm: float, rng
-) -> Dataset:
-    """What the tracker exports: readings in its own frame, a set column, its accuracy."""
-    n = len(commands)
-    readings = tracker.in_own_frame(tracker.measure(forward_batch(truth, commands).targets, rng))
-    return Dataset(
-        model=truth.name,
-        frame="tracker",
-        actuator_names=truth.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
-        target_names=truth.target_names,
-        pose_ids=np.arange(1, n + 1),
-        sets=np.array(["calibration"] * n_cal + ["test"] * (n - n_cal)),
-        commands=commands,
-        readings=readings,
-        order=np.arange(n),
-        tracker={"noise": tracker.noise.describe(), "sigma_mm": sigma_mm},
-        notes="twin: generic 6R arm, tracker in its own frame",
-    )
 
 
 def _cli(args: list[str], log: Path) -> int:
@@ -118,7 +99,15 @@ def _variant(
     sigma_mm = scenario.get("tracker.sigma_mm", float)
     (out_dir / "datasets").mkdir(parents=True, exist_ok=True)
     data = write_dataset(
-        _dataset(truth, tracker, commands, n_cal, sigma_mm, rng),
+        tracker_frame_dataset(
+            truth,
+            tracker,
+            commands,
+            n_cal,
+            sigma_mm,
+            rng,
+            notes="twin: generic 6R arm, tracker in its own frame",
+        ),
         out_dir / "datasets" / f"{name}.csv",
     )
     result_json, verify_json = out_dir / f"{name}_result.json", out_dir / f"{name}_verify.json"
@@ -128,8 +117,12 @@ def _variant(
         ["identify", *common, "--set", "calibration", "--out", str(result_json)],
         out_dir / f"{name}_identify.log",
     )
-    if not result_json.is_file():
-        raise ScenarioError(f"identify exited {code_id} without a result; see {name}_identify.log")
+    if not result_json.is_file():  # the log goes with the run's folder: its words, here
+        said = (out_dir / f"{name}_identify.log").read_text().strip().splitlines()
+        raise ScenarioError(
+            f"{name}: identify exited {code_id} without a result; it said:\n  "
+            + "\n  ".join(said[-12:])
+        )
     code_ver = _cli(
         [
             "verify",
@@ -165,7 +158,22 @@ def _variant(
         name.replace("_", " "),
         machine=name,
     )
+    progress.step(f"{name}: compensate, re-measure, export, verify the exported model")
+    loop = close_the_loop(
+        scenario,
+        name,
+        model_path,
+        errors_path,
+        data,
+        result_json,
+        truth,
+        calibrated,
+        tracker,
+        out_dir,
+        _cli,
+    )
     return {
+        **loop,
         "n_poses": {"calibration": n_cal, "test": n_test},
         "n_targets": nominal.n_targets,
         "exit_codes": {"identify": code_id, "verify": code_ver},

@@ -22,7 +22,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from calib.atomic_files import atomic_path, write_json_atomic, write_text_atomic
+from calib.atomic_files import write_json_atomic, write_text_atomic
+from calib.write_set import staged
 from scenarios.config import REPO_ROOT, ScenarioError, load_scenario
 from scenarios.sweep_aggregate import aggregate
 from scenarios.sweep_engine import engine_env, make_engine
@@ -154,13 +155,13 @@ def sweep(
     summary = aggregate(scenario.name, engine, swept, ordered)
     if where is not None:
         summary["ray"] = where  # {"address": RAY_ADDRESS or None, "cpus": the cluster's}
-    figures = distribution_pngs(out, scenario.name, ordered)
-    summary["figures"] = figures
-    summary["recording"] = f"{scenario.name}_sweep.rrd"
-    report = report_markdown(summary, figures)
-    with atomic_path(out / summary["recording"], suffix=".rrd") as tmp:
-        record_timeline(tmp, scenario.name, ordered, report)
-    write_json_atomic(out / "summary.json", summary)
-    write_text_atomic(out / "report.md", report)
+    with staged(out) as stage:  # the aggregate's files go in together, or none of them
+        figures = distribution_pngs(stage, scenario.name, ordered)
+        summary["figures"] = figures
+        summary["recording"] = f"{scenario.name}_sweep.rrd"
+        report = report_markdown(summary, figures)
+        record_timeline(stage / summary["recording"], scenario.name, ordered, report)
+        write_json_atomic(stage / "summary.json", summary)
+        write_text_atomic(stage / "report.md", report)
     bar.message(f"wrote {out / 'summary.json'} and report.md")
     return summary, out

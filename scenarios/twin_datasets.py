@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,37 @@ def measured_dataset(
         order=np.arange(n),
         commanded_poses=poses,
         tracker=tracker_info,
+        notes=notes,
+    )
+
+
+def tracker_frame_dataset(
+    truth: Mechanism,
+    tracker: Tracker,
+    commands: np.ndarray,
+    n_cal: int,
+    sigma_mm: float,
+    rng: np.random.Generator,
+    effects: Sequence = (),
+    notes: str = "",
+) -> Dataset:
+    """What a tracker standing in its own frame exports of the truth (with its physical
+    ``effects``): readings in the tracker's frame, a set column (``n_cal`` calibration rows,
+    then test rows) and the accuracy the export declares (``sigma_mm``)."""
+    n = len(commands)
+    m = measure(truth, commands, tracker, rng, effects=effects)
+    return Dataset(
+        model=truth.name,
+        frame="tracker",
+        actuator_names=truth.actuator_names,
+        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
+        target_names=truth.target_names,
+        pose_ids=np.arange(1, n + 1),
+        sets=np.array(["calibration"] * n_cal + ["test"] * (n - n_cal)),
+        commands=commands,
+        readings=tracker.in_own_frame(m.readings),
+        order=np.arange(n),
+        tracker={"noise": tracker.noise.describe(), "sigma_mm": sigma_mm},
         notes=notes,
     )
 

@@ -21,6 +21,7 @@ CHECKED = {
     "hexapod_paper": "test_scenario_hexapod",
     "liu_vs_ols": "test_scenario_liu_vs_ols",
     "liu_vs_ols_draws": "test_scenario_liu_vs_ols",
+    "liu_regime": "test_liu_regime",
     "undeclared_effect": "test_scenario_undeclared_effect",
     "optimal_poses": "test_pose_selection",
     "serial_arm": "test_recording",

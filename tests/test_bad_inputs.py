@@ -116,6 +116,15 @@ def encode_csv(env: Env, encode: Callable[[str], bytes]) -> Callable[[], object]
     return lambda: read_dataset(path)
 
 
+def random_text_csv(env: Env) -> Callable[[], object]:
+    """3000 random printable bytes (and line ends) in place of the CSV, beside its sidecar."""
+    path = env.dataset()
+    rng = np.random.default_rng(2)
+    alphabet = np.frombuffer(bytes(range(32, 127)) + b"\n" * 3, dtype=np.uint8)
+    path.write_bytes(rng.choice(alphabet, 3000).tobytes())
+    return lambda: read_dataset(path)
+
+
 def latin1_csv(env: Env) -> Callable[[], object]:
     path = env.dataset()
     lines = csv_lines(path)
@@ -317,6 +326,26 @@ CASES: dict[str, Case] = {
         DatasetError,
         ("poses.csv line 6", "column 'pose_id'", "expected an integer", "'P7'"),
     ),
+    "pose id beyond int64": (
+        lambda env: edit_csv(env, set_cell(2, "pose_id", "99999999999999999999")),
+        DatasetError,
+        ("poses.csv line 2", "column 'pose_id'", "outside the range of a 64-bit integer"),
+    ),
+    "negative pose id beyond int64": (
+        lambda env: edit_csv(env, set_cell(3, "pose_id", "-9223372036854775809")),
+        DatasetError,
+        ("poses.csv line 3", "column 'pose_id'", "-9223372036854775809 is outside the range"),
+    ),
+    "reading of 1e300 mm": (
+        lambda env: edit_csv(env, set_cell(4, "x_mm", "1e300")),
+        DatasetError,
+        ("poses.csv line 4", "column 'x_mm'", "1e+300 mm is beyond 1e+06 mm (1 km)"),
+    ),
+    "random bytes": (
+        random_text_csv,
+        DatasetError,
+        ("poses.csv", "not a dataset CSV", "names none of the columns", "pose_id, set"),
+    ),
     "NaN command": (
         lambda env: edit_csv(env, set_cell(3, "cmd:leg2", "nan")),
         DatasetError,
@@ -410,6 +439,11 @@ CASES: dict[str, Case] = {
         lambda env: model_file(env, "[[parameter]]", "[[paramter]]", count=2),
         ParameterError,
         ("bad.toml", "unknown top-level key 'paramter'", "did you mean 'parameter'"),
+    ),
+    "error model of another machine": (
+        lambda env: model_file(env, 'model = "hexapod_rrrprr"', 'model = "polisher"'),
+        ParameterError,
+        ("bad.toml is an error model for 'polisher'", "the MJCF is 'hexapod_rrrprr'"),
     ),
     "element not in the model": (
         lambda env: model_file(env, 'element = "leg1_base"', 'element = "leg9_base"'),

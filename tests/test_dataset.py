@@ -417,7 +417,7 @@ def test_other_frame_is_recorded(tmp_path: Path) -> None:
 
 
 def test_write_into_missing_directory_raises(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(OSError, match=r"No such file or directory; none of poses\.csv"):
         write_dataset(make_dataset(), tmp_path / "absent" / "poses.csv")
     assert not (tmp_path / "absent").exists()
 

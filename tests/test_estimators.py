@@ -407,7 +407,8 @@ def test_scale_columns_divides_by_the_column_norms():
 
 def test_liu_in_the_papers_units_is_eq_11_literally():
     """(H^T H + I)^-1 (H^T y + d b_OLS) with H in mm and deg (or rad), d from Eq. 14, written
-    out with explicit inverses; its answer depends on the unit of the angle columns."""
+    out with explicit inverses; its answer depends on the unit of the angle columns. The noise
+    variance is Eq. 13's RSS / n, or RSS / (n - m) when asked for."""
     from calib.estimators.liu import liu_d_optimal
     from calib.estimators.liu_paper_units import LiuPaperUnits
 
@@ -418,22 +419,74 @@ def test_liu_in_the_papers_units_is_eq_11_literally():
     y = h @ x_true + rng.normal(0, 5e-6, 40)
     out = {}
     for unit, per_rad in (("deg", np.pi / 180), ("rad", 1.0)):
-        units = np.where(is_angle, 1 / per_rad, 1e3)  # paper units per SI unit
-        hp, yp = h * 1e3 / units, y * 1e3
-        g = hp.T @ hp
-        b_ols = np.linalg.solve(g, hp.T @ yp)
-        lam, phi = np.linalg.eigh(g)
-        alpha = phi.T @ b_ols
-        s2 = np.sum((yp - hp @ b_ols) ** 2) / (40 - 4)
-        d = float(np.clip(liu_d_optimal(lam, alpha[None, :], s2, 1.0)[0], 0, 1))
-        expected = np.linalg.solve(g + np.eye(4), hp.T @ yp + d * b_ols) / units
-        est = LiuPaperUnits(angle_unit=unit, is_angle=is_angle).fit(h, y)
-        np.testing.assert_allclose(est.x, expected, rtol=1e-9, atol=1e-15)
-        assert est.bias_parameter == pytest.approx(d)
-        out[unit] = est.x
-    assert not np.allclose(out["deg"], out["rad"], rtol=1e-8, atol=0)
+        for rule, dof in (("paper", 40), ("unbiased", 40 - 4)):
+            units = np.where(is_angle, 1 / per_rad, 1e3)  # paper units per SI unit
+            hp, yp = h * 1e3 / units, y * 1e3
+            g = hp.T @ hp
+            b_ols = np.linalg.solve(g, hp.T @ yp)
+            lam, phi = np.linalg.eigh(g)
+            alpha = phi.T @ b_ols
+            s2 = np.sum((yp - hp @ b_ols) ** 2) / dof
+            d = float(np.clip(liu_d_optimal(lam, alpha[None, :], s2, 1.0)[0], 0, 1))
+            expected = np.linalg.solve(g + np.eye(4), hp.T @ yp + d * b_ols) / units
+            est = LiuPaperUnits(angle_unit=unit, is_angle=is_angle, sigma2_rule=rule).fit(h, y)
+            np.testing.assert_allclose(est.x, expected, rtol=1e-9, atol=1e-15)
+            assert est.bias_parameter == pytest.approx(d)
+            out[unit, rule] = est.x
+    assert not np.allclose(out["deg", "paper"], out["rad", "paper"], rtol=1e-8, atol=0)
+    assert not np.allclose(out["deg", "paper"], out["deg", "unbiased"], rtol=1e-8, atol=0)
     with pytest.raises(ValueError, match="which of the H columns are angles"):
         LiuPaperUnits().fit(h, y)
+    with pytest.raises(ValueError, match="sigma2_rule"):
+        LiuPaperUnits(sigma2_rule="n-1")
+
+
+def test_paper_units_liu_against_eqs_11_to_14_by_svd():
+    """The first paper's Eqs. 11-14 evaluated term by term from the SVD of H in mm and deg:
+    Eq. 12's Z = H Phi and Lambda (Phi, lambda from the SVD H = U S V^T: Phi = V, lambda =
+    s^2), Eq. 13's sigma^2 = tr(r r^T) / n and alpha_j^2 = (Phi^T b b^T Phi)_jj, Eq. 14's d as
+    written (sums over j), Eq. 11 as written; d must come out inside (0, 1), unclipped, for
+    the check to be of the formula and not of the clipping. The default of the estimator is
+    this reading (sigma^2 = RSS / n)."""
+    from calib.estimators.liu_paper_units import LiuPaperUnits
+
+    rng = np.random.default_rng(11)
+    n, m = 60, 5
+    is_angle = np.array([False, False, True, False, True])
+    base = rng.normal(size=(n, m))
+    base[:, 3] = base[:, 0] + 0.05 * rng.normal(size=n)  # multicollinear, as the paper's H
+    h = base * np.where(is_angle, 0.2, 1.0)  # SI: metres of target per metre or radian
+    x_true = np.array([4e-5, -2e-5, 3e-4, 1e-5, -2e-4])  # m and rad
+    y = h @ x_true + rng.normal(0, 4e-6, n)  # m
+
+    units = np.where(is_angle, 180.0 / np.pi, 1e3)  # mm per m, deg per rad
+    hp, yp = h * 1e3 / units, y * 1e3  # H in mm per (mm or deg), dp in mm
+    u, sv, vt = np.linalg.svd(hp, full_matrices=False)
+    phi, lam = vt.T, sv**2  # Eq. 12: the eigenvectors and eigenvalues of H^T H
+    z = hp @ phi
+    np.testing.assert_allclose(z.T @ z, np.diag(lam), atol=1e-9 * lam.max())
+    b_ols = phi @ ((u.T @ yp) / sv)  # OLS, from the SVD
+    r = yp - hp @ b_ols
+    sigma2 = np.trace(np.outer(r, r)) / n  # Eq. 13
+    alpha2 = np.diag(phi.T @ np.outer(b_ols, b_ols) @ phi)  # Eq. 13's alpha_j^2
+    d = sum((alpha2[i] - sigma2) / (lam[i] + 1) ** 2 for i in range(m)) / sum(
+        (sigma2 + lam[i] * alpha2[i]) / (lam[i] * (lam[i] + 1) ** 2) for i in range(m)
+    )  # Eq. 14
+    assert 0.0 < d < 1.0
+    chi_l = np.linalg.inv(hp.T @ hp + np.eye(m)) @ (hp.T @ yp + d * b_ols)  # Eq. 11, mm / deg
+
+    est = LiuPaperUnits(angle_unit="deg", is_angle=is_angle).fit(h, y)
+    assert est.bias_parameter == pytest.approx(d, rel=1e-10)
+    assert est.scale_parameter == 1.0
+    assert est.sigma2 == pytest.approx(sigma2 * 1e-6, rel=1e-10)  # m^2
+    np.testing.assert_allclose(est.x * units, chi_l, rtol=1e-9, atol=1e-12 * np.abs(chi_l).max())
+    # the same through the estimator's batched paths
+    np.testing.assert_allclose(
+        LiuPaperUnits(angle_unit="deg", is_angle=is_angle).fit_many(h, y[None, :])[0] * units,
+        chi_l,
+        rtol=1e-9,
+    )
+    assert "sigma^2 = RSS / n (Eq. 13)" in est.notes
 
 
 def test_draws_give_each_estimator_its_fit_many():
@@ -466,3 +519,20 @@ def test_draws_give_each_estimator_its_fit_many():
         )
     with pytest.raises(ValueError, match="noise must be"):
         draws(h, y0, noise[:, :-1])
+
+
+def test_paper_units_liu_states_its_variance_and_covariance_in_si():
+    """sigma^2 in m^2 like every estimate, and the covariance sigma^2 A A^T of its linear map
+    (a variance of mm^2 taken for m^2 made the standard errors 1000 times too large)."""
+    from calib.estimators.liu_paper_units import LiuPaperUnits
+
+    h, x, rng = calibration_like()
+    is_angle = np.array([False, True, False, True, False, True, False, False])
+    y = h @ x + 1e-3 * rng.normal(size=h.shape[0])
+    est = LiuPaperUnits(angle_unit="deg", is_angle=is_angle).fit(h, y)
+    ols = OLS().fit(h, y)
+    rss = np.sum((y - h @ ols.x) ** 2)
+    assert est.sigma2 == pytest.approx(rss / h.shape[0], rel=1e-10)
+    a = est.linear_map
+    np.testing.assert_allclose(est.covariance, est.sigma2 * a @ a.T, rtol=1e-9, atol=1e-30)
+    np.testing.assert_allclose(a @ y, est.x, rtol=1e-9, atol=1e-12 * np.abs(est.x).max())

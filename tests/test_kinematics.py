@@ -319,6 +319,10 @@ def test_mjcf_without_actuators():
     xml = _edit(_slider(), '<position name="drive" joint="slide"/>', "")
     with pytest.raises(ModelError, match=r"model 'slider' has no <actuator>"):
         Mechanism.from_xml_string(xml)
+    # with a keyframe, MuJoCo itself would only complain of the keyframe's ctrl size
+    keyed = xml.replace("</mujoco>", '<keyframe><key name="home" ctrl="0.03"/></keyframe></mujoco>')
+    with pytest.raises(ModelError, match=r"model 'slider' has no <actuator>: nothing to command"):
+        Mechanism.from_xml_string(keyed)
 
 
 def test_mjcf_actuator_problems():

@@ -356,7 +356,7 @@ def test_parameter_file_errors(tmp_path, hexapod):
     bad_toml = _write(tmp_path, "a.toml", "[[parameter]\nname = 1\n")
     with pytest.raises(ParameterError, match=r"a.toml is not valid TOML"):
         load_parameter_set(bad_toml, hexapod.model)
-    empty = _write(tmp_path, "b.toml", 'model = "x"\n')
+    empty = _write(tmp_path, "b.toml", 'model = "hexapod_rrrprr"\n')
     with pytest.raises(ParameterError, match=r"b.toml has no \[\[parameter\]\] entries"):
         load_parameter_set(empty, hexapod.model)
     lacking = _write(tmp_path, "c.toml", '[[parameter]]\nname = "p"\nkind = "body_pos"\n')

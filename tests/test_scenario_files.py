@@ -99,6 +99,8 @@ BAD = [
     ("values file and random truth both", HEX, "[tracker]",
      "[truth.random]\ntranslation_mm = 1.0\n\n[tracker]", ["not both", "truth.values_file"]),
     ("missing key", HEX, "many_poses = 256\n", "", ["missing key 'plans.many_poses'"]),
+    ("a hundred million poses", HEX, "many_poses = 256", "many_poses = 100000000",
+     ["'plans.many_poses' must be <= 100000, got 100000000"]),
     ("missing table", UND, "[plan]\n", "[plam]\n",
      ["unknown key 'plam'", "did you mean 'plan'", "missing table [plan]"]),
     ("unknown study", HEX, 'study = "hexapod_paper"', 'study = "hexapod_papr"',
@@ -214,6 +216,13 @@ def test_a_study_reading_an_undeclared_key_is_caught():
     scenario = load_scenario("undeclared_effect")
     with pytest.raises(LookupError, match="does not declare"):
         scenario.get("tracker.noise", str, "none")
+
+
+def test_utf8_byte_order_mark_is_accepted(tmp_path):
+    """A scenario saved by an editor that writes a UTF-8 BOM (was 'Invalid statement')."""
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + (SCENARIO_DIR / HEX).read_bytes())
+    assert load_scenario(str(path)).data == load_scenario(str(SCENARIO_DIR / HEX)).data
 
 
 def test_study_modules_write_only_into_their_out_dir():

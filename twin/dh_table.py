@@ -302,15 +302,17 @@ def main(argv: list[str] | None = None) -> int:
     except DHTableError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    # the project's one atomic writer; it lives in calib but depends on nothing there
-    from calib.atomic_files import write_text_atomic
+    # the project's one writer of file sets; it lives in calib but depends on nothing there
+    from calib.write_set import write_files
 
     out = Path(args.out_dir)
-    xml = write_text_atomic(out / f"{args.name}.xml", build_xml(table, args.name))
-    toml = write_text_atomic(
-        out / f"{args.name}.params.toml",
-        build_parameters(table, args.name, not args.no_target_errors, args.base_errors),
-    )
+    xml, toml = out / f"{args.name}.xml", out / f"{args.name}.params.toml"
+    params = build_parameters(table, args.name, not args.no_target_errors, args.base_errors)
+    try:  # the model and its error model together, or neither
+        write_files({xml: build_xml(table, args.name), toml: params}, make_parents=True)
+    except OSError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(f"wrote {xml} and {toml}")
     return 0
 

@@ -39,6 +39,17 @@ BOUND_INERTIA = 1e-6  # kg m^2
 _NO_MASS = "mass and inertia of moving bodies must be larger than mjMINVAL"
 
 
+def check_actuated(spec: mujoco.MjSpec, where: str) -> None:
+    """Refuse a machine model without ``<actuator>`` before compiling it: MuJoCo would name
+    only a consequence (a keyframe's ctrl size)."""
+    if len(spec.actuators) == 0:
+        raise ModelError(
+            f"{where}: model '{spec.modelname}' has no <actuator>: nothing to command; "
+            "calibration needs one actuator per commanded joint (a dataset's cmd:<name> "
+            "columns name them)"
+        )
+
+
 def compile_spec(spec: mujoco.MjSpec, where: str) -> tuple[mujoco.MjModel, bool]:
     """Compile; if MuJoCo refuses bodies without mass, again with bounded defaults.
 
@@ -97,6 +108,7 @@ class Mechanism:
             spec = mujoco.MjSpec.from_file(str(path))
         except ValueError as exc:
             raise ModelError(f"MuJoCo could not compile {path}: {exc}") from exc
+        check_actuated(spec, str(path))
         model, defaulted = compile_spec(spec, str(path))
         return cls(model, name=None, masses_defaulted=defaulted)
 
@@ -106,6 +118,7 @@ class Mechanism:
             spec = mujoco.MjSpec.from_string(xml)
         except ValueError as exc:
             raise ModelError(f"MuJoCo could not compile the MJCF string: {exc}") from exc
+        check_actuated(spec, "the MJCF string")
         model, defaulted = compile_spec(spec, "the MJCF string")
         return cls(model, masses_defaulted=defaulted)
 

@@ -4,6 +4,15 @@ Minimises ``0.5 |r(x)|^2``. Steps are solved on the column-scaled Jacobian (Marq
 scaling: the damping acts on each parameter in proportion to its own curvature), the damping
 follows Nielsen's gain-ratio rule, and a trial point whose evaluation fails (for a closed
 chain: a closure that does not solve) counts as a rejected step.
+
+Once a step has shown curvature (a gain ratio below ``GAIN_CURVED``, or a rejected trial),
+every further step gets geodesic acceleration (Transtrum and Sethna, "Improvements to the
+Levenberg-Marquardt algorithm for nonlinear least-squares minimization", 2012; as in GSL's
+``lmaccel``): the second derivative of the residual along the step, by one extra evaluation
+a fraction ``geodesic_h`` of the step away, bends the step along a curved valley. Such a
+valley is what a nearly redundant pair leaves (a hexapod's base tilt against a tracker
+registration's): plain steps crawled along it for 88 iterations, accelerated ones took 21.
+A well-conditioned fit (gain ratios near 1) never pays for the extra evaluation.
 """
 
 from __future__ import annotations
@@ -33,6 +42,17 @@ class LMOptions:
     # ~1e-10 relative at the noise floor, and smaller predicted decreases were only ever
     # rejected trial steps (8 of 13 evaluations of a hexapod fit); 0 disables the test
     predicted_rtol: float = 1e-10
+    # geodesic acceleration once a step has shown curvature (module docstring); the
+    # accelerated step is taken only if 2 |a| <= geodesic_ratio |v| (Transtrum's alpha), else
+    # the plain one (near an exact fit the finite difference measures round-off)
+    geodesic: bool = True
+    geodesic_h: float = 0.1
+    geodesic_ratio: float = 0.75
+
+
+# a gain ratio below this (or a rejected trial): the quadratic model missed, the path is
+# curved; from then on every step of the fit is accelerated
+GAIN_CURVED = 0.75
 
 
 @dataclass(frozen=True)
@@ -75,6 +95,7 @@ def levenberg_marquardt(
     cost = 0.5 * float(r @ r)
     history = [cost]
     damping, nu = opt.initial_damping, 2.0
+    curved = False
     for it in range(1, opt.max_iterations + 1):
         scale = np.linalg.norm(jac, axis=0)
         scale = np.where(scale > 0, scale, 1.0)
@@ -87,18 +108,24 @@ def levenberg_marquardt(
             return LMResult(x, r, jac, cost, it - 1, True, history, "converged")
         accepted = False
         while not accepted:
-            try:
-                step_s = np.linalg.solve(a + damping * np.eye(len(x)), -g)
-            except np.linalg.LinAlgError:
-                step_s = np.linalg.lstsq(a + damping * np.eye(len(x)), -g, rcond=None)[0]
+            damped = a + damping * np.eye(len(x))
+            velocity_s = _solve(damped, -g)
+            # the quadratic model's decrease for the velocity: the acceleration corrects the
+            # path for a curvature that model does not see (Transtrum and Sethna)
+            predicted = -(g @ velocity_s) - 0.5 * velocity_s @ a @ velocity_s
+            step_s = velocity_s
+            if opt.geodesic and curved:
+                step_s = _accelerated(
+                    residual, x, r, jac, js, scale, damped, velocity_s, opt, recoverable
+                )
             step = step_s / scale
-            predicted = -(g @ step_s) - 0.5 * step_s @ a @ step_s
             try:
                 r_new, state_new = residual(x + step)
                 cost_new = 0.5 * float(r_new @ r_new)
             except recoverable:
                 cost_new, r_new, state_new = np.inf, None, None
             gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+            curved = curved or not (np.isfinite(cost_new) and gain >= GAIN_CURVED)
             if np.isfinite(cost_new) and gain > 0:
                 accepted = True
                 x = x + step
@@ -124,6 +151,40 @@ def levenberg_marquardt(
                         f"the cost {cost:.4g}"
                     )
     return LMResult(x, r, jac, cost, opt.max_iterations, False, history, "iteration limit")
+
+
+def _solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.solve(matrix, rhs)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(matrix, rhs, rcond=None)[0]
+
+
+def _accelerated(
+    residual: ResidualFn,
+    x: np.ndarray,
+    r: np.ndarray,
+    jac: np.ndarray,
+    js: np.ndarray,
+    scale: np.ndarray,
+    damped: np.ndarray,
+    step_s: np.ndarray,
+    opt: LMOptions,
+    recoverable: tuple[type[BaseException], ...],
+) -> np.ndarray:
+    """The scaled step ``v`` with geodesic acceleration, ``v + a / 2``; ``v`` itself when
+    the extra evaluation fails or ``2 |a| > ratio |v|`` (Transtrum's test)."""
+    h = opt.geodesic_h
+    velocity = step_s / scale
+    try:
+        r_h, _ = residual(x + h * velocity)
+    except recoverable:
+        return step_s
+    second = (2.0 / h) * ((r_h - r) / h - jac @ velocity)  # r'' along the step
+    acc_s = _solve(damped, -(js.T @ second))
+    if not 2.0 * np.linalg.norm(acc_s) <= opt.geodesic_ratio * np.linalg.norm(step_s):
+        return step_s
+    return step_s + 0.5 * acc_s
 
 
 def _gauss_newton_decrease(a: np.ndarray, g: np.ndarray) -> float:

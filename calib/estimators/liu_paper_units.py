@@ -7,9 +7,15 @@ angles: a column in degrees is pi/180 times smaller than in radians, its eigen-d
 weaker, and Liu shrinks them more. This estimator makes that choice explicit
 (``angle_unit``) so that both readings can be shown beside the unit-free Liu-type estimator
 of calib.estimators.liu. d is Eq. 14 (the MSE-optimal d for k = 1), clipped to [0, 1].
+
+The noise variance of Eqs. 13-14 is the paper's sigma^2 = RSS / n (Eq. 13: the trace of the
+OLS residual's outer product over n); ``sigma2_rule="unbiased"`` takes RSS / (n - m) instead
+(a larger sigma^2, a smaller d: more shrinkage).
 """
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 
@@ -22,7 +28,15 @@ ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
 class LiuPaperUnits:
     name = "liu_paper"
 
-    def __init__(self, angle_unit: str = "deg", k: float = 1.0, is_angle=None) -> None:
+    def __init__(
+        self,
+        angle_unit: str = "deg",
+        k: float = 1.0,
+        is_angle=None,
+        sigma2_rule: Literal["paper", "unbiased"] = "paper",
+    ) -> None:
+        if sigma2_rule not in ("paper", "unbiased"):
+            raise ValueError(f"sigma2_rule must be 'paper' or 'unbiased', got {sigma2_rule!r}")
         if angle_unit not in ANGLE_UNITS:
             raise ValueError(f"angle_unit must be one of {sorted(ANGLE_UNITS)}, got {angle_unit!r}")
         if not (np.isfinite(k) and k > 0):
@@ -30,6 +44,11 @@ class LiuPaperUnits:
         self.angle_unit = angle_unit
         self.k = float(k)
         self.is_angle = None if is_angle is None else np.asarray(is_angle, dtype=bool)
+        self.sigma2_rule = sigma2_rule
+
+    def _dof(self, n: int, m: int) -> int:
+        """The divisor of the residual sum of squares: n (Eq. 13) or n - m."""
+        return n if self.sigma2_rule == "paper" else n - m
 
     def _units(self, m: int) -> np.ndarray:
         """Paper units per SI unit of each parameter: 1e3 (mm per m) or deg/rad per rad."""
@@ -56,7 +75,7 @@ class LiuPaperUnits:
         yp = np.atleast_2d(ys) * 1e3  # mm
         yu = yp @ u  # once for alpha and the residual
         rss = np.sum((yp - yu @ u.T) ** 2, axis=1)
-        x, d, s2, f = self._filtered(yu / s, rss / (n - m), s**2, vt, units)
+        x, d, s2, f = self._filtered(yu / s, rss / self._dof(n, m), s**2, vt, units)
         return x, d, s2, (u, s, vt, units, f)
 
     def _filtered(
@@ -71,13 +90,17 @@ class LiuPaperUnits:
 
     def fit(self, h: np.ndarray, y: np.ndarray, sigma2: float | None = None) -> LinearEstimate:
         x, d, s2, (u, s, vt, units, f) = self._solve(h, y)
-        s2v = float(s2[0]) if sigma2 is None else check_sigma2(sigma2)
+        # sigma^2 in SI (m^2) as every estimate states it: the fit's own is in mm^2
+        s2v = float(s2[0]) * 1e-6 if sigma2 is None else check_sigma2(sigma2)
         # covariance of x = A y with A = V diag(f / s) U^T (paper units), then SI
         cov_p = s2v * 1e6 * ((vt.T * (f[0] / s) ** 2) @ vt)
         cov = cov_p / np.outer(units, units)
         notes = (
             f"the paper's Eq. 11 literally: k = {self.k:g} on H in mm and {self.angle_unit}",
             f"d = {float(d[0]):.4g}",
+            "sigma^2 = RSS / n (Eq. 13)"
+            if self.sigma2_rule == "paper"
+            else "sigma^2 = RSS / (n - m)",
         )
         a = (vt.T * (f[0] / s)) @ u.T * 1e3 / units[:, None]
         return LinearEstimate(
@@ -104,4 +127,4 @@ class LiuPaperUnits:
         n, m = u.shape
         w = draws.prob.u.T @ u
         alpha = (draws.yu @ w) * 1e3 / s
-        return self._filtered(alpha, draws.rss * 1e6 / (n - m), s**2, vt, units)[0]
+        return self._filtered(alpha, draws.rss * 1e6 / self._dof(n, m), s**2, vt, units)[0]

@@ -1,0 +1,229 @@
+"""liu_vs_ols's report says what the run's numbers say: fed other numbers, its sentences change.
+
+The summaries here are made up (no scenario runs): each test changes the numbers a sentence
+is made from and checks that the sentence follows them.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+
+from scenarios.liu_regime_report import report as regime_report
+from scenarios.liu_vs_ols_pipeline import PAPER
+from scenarios.liu_vs_ols_report import report
+
+
+def _row(mean: float, mx: float) -> dict[str, float]:
+    return {"pos_mean_mm": mean, "pos_max_mm": mx, "ori_max_deg": 0.01, "ori_mean_deg": 0.004}
+
+
+def summary() -> dict:
+    test = {
+        "uncalibrated": _row(14.2, 15.7),
+        "coarse": _row(0.113, 0.174),
+        "ols": _row(0.0359, 0.0972),
+        "liu": _row(0.0359, 0.0975),
+        "liu_paper_deg": _row(0.0361, 0.1003),
+        "loop": _row(0.0134, 0.0269),
+        "ols_again": _row(0.0359, 0.0972),
+    }
+    return {
+        "paper": PAPER,
+        "truth_random": {"distribution": "uniform", "translation_mm": 0.04},
+        "truth_effects": ["joint_backlash", "thermal_growth", "lead_error"],
+        "n_source_errors": 150,
+        "n_identifiable": 51,
+        "coarse_iterations": 2,
+        "coarse_converged": True,
+        "runtime_s": 9.0,
+        "liu_bias_d": 4.966e-12,
+        "liu_k": 5.506e-12,
+        "liu_d": 4.966e-12 / 5.506e-12,
+        "estimators": {
+            "liu": {"bias_parameter": 4.966e-12, "scale_parameter": 5.506e-12, "notes": []},
+            "liu_paper_deg": {"bias_parameter": 0.9318, "scale_parameter": 1.0, "notes": []},
+        },
+        "tracker_sigma_mm": 0.005,
+        "scoring": {
+            "clock": "same",
+            "start_pose": 148,
+            "order_control_um": 0.0,
+            "order_control_all_um": 0.0,
+        },
+        "layers": {"test": test, "calibration": copy.deepcopy(test), "all": copy.deepcopy(test)},
+        "monte_carlo_runs": 10000,
+        "noise_only_test_um": {
+            "ols": {"mean": 1.92, "max": 4.65},
+            "liu_paper_deg": {"mean": 1.59, "max": 3.81},
+        },
+        "sigma_ols": 76.3,
+        "sigma_liu": 47.8,
+        "eta_percent": 37.3,
+        "eta_percent_liu_k1": 37.8,
+        "eta_at_used_d_percent": {"liu": 6.4, "liu_k1": 7.2, "liu_paper_deg": 6.8},
+        "paper_units": {"eta_percent": 36.6, "eta_percent_rad": 36.6},
+        "loop": {
+            "diagnosed_effect": "backlash",
+            "reason": "backlash lowers the held-out error",
+            "residual_rms_before_mm": 0.080,
+            "residual_rms_after_mm": 0.014,
+            "noise_floor_rms_mm": 0.00866,
+            "lm_iterations": 18,
+            "coefficients": {"backlash.theta4.half_play": 1.2e-4},
+            "coefficient_std": {"backlash.theta4.half_play": 7e-6},
+        },
+        "draws": {"n": 0, "note": "not run yet: make scenario NAME=liu_vs_ols_draws"},
+        "regime": {"note": "not run yet: make scenario NAME=liu_regime"},
+    }
+
+
+def test_the_effects_named_are_the_truths():
+    s = summary()
+    text = report(s)
+    assert "lost motion" in text and "thermal growth" in text and "lead error" in text
+    s["truth_effects"] = ["joint_backlash"]
+    text = report(s)
+    assert "lost motion" in text
+    assert "thermal" not in text.split("## Does")[1].split("## Can")[0]
+    assert "lead error" not in text
+    s["truth_effects"] = []
+    text = report(s)
+    assert "no effect beyond geometry" in text and "lost motion" not in text
+
+
+def test_the_loop_sentence_follows_the_loop():
+    s = summary()
+    assert "The loop row shows what does lower the error here: naming the effect (backlash)" in (
+        report(s)
+    )
+    s["loop"]["coefficients"] = {}  # named nothing, and worse than OLS
+    s["loop"]["diagnosed_effect"] = "none"
+    s["layers"]["test"]["loop"] = _row(0.0400, 0.11)
+    text = report(s)
+    assert "what does lower the error" not in text
+    assert "The loop named no effect (none)" in text and "no better than OLS" in text
+    s["loop"]["coefficients"] = {"backlash.theta4.half_play": 1e-4}  # named, and worse
+    s["loop"]["diagnosed_effect"] = "backlash"
+    text = report(s)
+    assert "The loop named backlash, but modelling it does not lower" in text
+
+
+def test_the_verdict_on_the_papers_gain_follows_the_numbers():
+    s = summary()
+    text = report(s)
+    assert "**No**" in text and "+0.56 %" in text  # 0.0359 -> 0.0361 mm
+    s["layers"]["test"]["liu_paper_deg"] = _row(0.0300, 0.060)  # the paper's gain
+    text = report(s)
+    assert "**Yes**" in text and "-16.43 %" in text
+
+
+def test_the_noise_ceiling_and_eta_are_the_runs():
+    s = summary()
+    text = report(s)
+    assert "1.92 um mean and 4.65 um max" in text and "less than the paper's gain" in text
+    assert "| liu (HKB k) | 37.3 | 6.4 |" in text
+    assert "eta is about the parameters, not the pose error" in text
+    assert "its shrinkage takes 0.33 um of noise off the mean" in text
+    s["noise_only_test_um"]["ols"] = {"mean": 7.5, "max": 20.0}
+    s["noise_only_test_um"]["liu_paper_deg"] = {"mean": 9.5, "max": 25.0}
+    s["eta_at_used_d_percent"]["liu"] = 21.0
+    text = report(s)
+    assert "7.5 um mean and 20 um max" in text and "as much as the paper's gain" in text
+    assert "2 um more than OLS's" in text
+    assert "| liu (HKB k) | 37.3 | 21.0 |" in text
+
+
+def test_the_order_control_verdict_follows_the_control():
+    s = summary()
+    assert "within round-off: the order" in report(s)
+    s["scoring"]["order_control_um"] = 1.2
+    text = report(s)
+    assert "NOT within round-off" in text and "1.2 um" in text
+
+
+def test_liu_is_named_by_its_k_and_the_header_agrees_with_the_log():
+    """The header prints d and k as the run's log does (d = 4.966e-12, k = 5.506e-12), and
+    the HKB variant is never called the paper's Liu."""
+    text = report(summary())
+    assert "d = 4.966e-12, k = 5.506e-12 (d/k = 0.902)" in text
+    assert "| liu (HKB k) |" in text and "| liu_paper_deg (paper's Liu) |" in text
+    assert "| liu | " not in text
+
+
+def test_the_regime_pointer_reads_the_map():
+    s = summary()
+    assert "make scenario NAME=liu_regime" in report(s)
+    cell = {
+        "n_draws": 20,
+        "estimators": {
+            "liu_paper_deg": {"minus_ols_um": {"median": 0.07}, "better_fraction": 0.15},
+            "liu": {"minus_ols_um": {"median": -0.4}, "better_fraction": 1.0},
+        },
+    }
+    s["regime"] = {
+        "source": "liu_regime/summary.json",
+        "cells": {"interpolated/0.005": cell},
+        "sigmas_mm": [0.005],
+        "truth_effects": ["joint_backlash"],
+    }
+    text = report(s)
+    assert "With the lost motion of the joints (backlash), the paper's Liu minus OLS" in text
+    assert "+0.07 um (median), better in 15% of draws" in text
+    assert "test layer by tracker noise (median, and the share of draws it is better): " in text
+    assert "0.005 mm: +0.07 um (15%)." in text
+    assert "geometry-only" not in text
+    geo = copy.deepcopy(cell)
+    geo["estimators"]["liu_paper_deg"] = {"minus_ols_um": {"median": -1.5}, "better_fraction": 0.98}
+    s["regime_geometry"] = {
+        "source": "liu_regime_geometry/summary.json",
+        "cells": {"interpolated/0.02": geo},
+        "sigmas_mm": [0.02],
+    }
+    text = report(s)
+    assert "On a geometry-only truth (liu_regime_geometry/summary.json)" in text
+    assert "0.02 mm: -1.5 um (98%)." in text
+    assert "The HKB Liu (`liu`) gains most in interpolated/0.005, 0.4 um" in text
+    assert "The paper's Liu (`liu_paper_deg`) gains over OLS in no cell" in text
+
+
+@pytest.fixture
+def regime_summary() -> dict:
+    def cell(ols: float, paper: float, better: float) -> dict:
+        e = {"minus_ols_um": {"median": paper, "p05": paper - 1, "p95": paper + 1}}
+        return {
+            "n_draws": 20,
+            "ols_test_pos_mean_um": {"median": ols},
+            "estimators": {"liu_paper_deg": {**e, "better_fraction": better}},
+        }
+
+    return {
+        "truth_random": None,
+        "truth_effects": [],
+        "n_draws": 20,
+        "seeds": [0, 19],
+        "engine": "local",
+        "runtime_s": 10.0,
+        "placement_poses": {"interpolated": {"description": "the middle layer", "n_poses": 49}},
+        "scoring": {"order_control_um": 0.0},
+        "estimators": ["liu_paper_deg"],
+        "cells": {
+            "interpolated/0.005": cell(36.0, 0.07, 0.15),
+            "interpolated/0.05": cell(41.0, -2.0, 0.95),
+        },
+    }
+
+
+def test_the_regime_report_says_where_each_estimator_wins(regime_summary):
+    text = regime_report(regime_summary)
+    assert "the paper's estimator loses 0.07 um" in text
+    assert "in 1 of 2 cells: interpolated/0.05." in text
+    assert "The largest median gain is 2 um (4.9% of OLS's 41 um there)" in text
+    regime_summary["cells"]["interpolated/0.005"]["estimators"]["liu_paper_deg"] = {
+        "minus_ols_um": {"median": -0.5, "p05": -1, "p95": 0},
+        "better_fraction": 0.97,
+    }
+    text = regime_report(regime_summary)
+    assert "the paper's estimator gains 0.5 um" in text
+    assert "in 2 of 2 cells" in text
