@@ -88,7 +88,8 @@ def test_figures_report_and_recording(run):
     assert {f"/figures/regime_{e}" for e in ESTIMATORS} <= entities
     assert "/report" in entities
     views = {v["name"] for v in assert_every_face_has_data(out / "liu_regime.rrd")}
-    assert {f"regime {e}" for e in ESTIMATORS} | {"report: key numbers"} <= views
+    named = {f"regime {e}".replace("_", " ") for e in ESTIMATORS}
+    assert named | {"report: key numbers"} <= views
 
 
 def test_placements_are_where_the_issue_puts_them():

@@ -8,6 +8,7 @@ loop (diagnosis, the named effect modelled, refit, compensation) below the OLS r
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -253,13 +254,17 @@ def test_draw_study_records_the_distribution_of_liu_minus_ols(tmp_path):
     view of the recording, and every view has data."""
     root = Path(__file__).resolve().parent.parent
     text = (root / "scenarios" / "liu_vs_ols_draws.toml").read_text()
-    for old, new in (
-        ("n = 100", "n = 2"),
-        ('estimators = ["ols", "liu", "liu_cv"]', 'estimators = ["ols", "liu"]'),
-        ('engine = "ray"', 'engine = "local"'),
-    ):
+    for old, new in (("n = 100", "n = 2"), ('engine = "ray"', 'engine = "local"')):
         assert old in text, old
         text = text.replace(old, new)
+    draws = text.index("[draws]")  # two estimators of the draws' list: seconds, not a minute
+    text = text[:draws] + re.sub(
+        r"estimators = \[.*?\]\n",
+        'estimators = ["ols", "liu"]\n',
+        text[draws:],
+        count=1,
+        flags=re.S,
+    )
     path = tmp_path / "liu_vs_ols_draws.toml"
     path.write_text(text)
     s, out = run_scenario(str(path), tmp_path / "results", quiet=True)
