@@ -14,10 +14,10 @@ residual into a failure for a user who wants that gate. Exit codes:
 
     0  success (the residual's size against the noise is said)
     2  bad input: the data or model files could not be used (the message names the cause)
-    3  the fit did not converge (which criterion failed is said)
-    4  the data do not fit the model: a likely data error named, too many outliers,
-       implausible well-determined estimates, an implausible residual, or a residual above
-       an explicit ``--max-ratio``
+    3  the fit did not converge (which criterion failed is said), no data error named
+    4  the data do not fit the model: a likely data error named (converged or not), too
+       many outliers, implausible well-determined estimates, an implausible residual, or a
+       residual above an explicit ``--max-ratio``
     5  compensate: some desired poses are out of reach (each is named; the others written)
 """
 
@@ -140,6 +140,9 @@ def judge_fit(
     def verdict(status: str, code: int, message: str) -> Verdict:
         return Verdict(status, code, residual_rms_mm, noise, ratio, accuracy, message, hints)
 
+    if hints:  # a named data error is the cause, whether or not the fit converged on it
+        tail = "" if converged else f"; the fit did not converge ({convergence_message})"
+        return verdict("poor_fit", EXIT_POOR_FIT, f"FAILED: the data look wrong; {size}{tail}")
     if not converged:
         return verdict(
             "not_converged",
@@ -147,8 +150,6 @@ def judge_fit(
             f"FAILED: the fit did not converge ({convergence_message or 'no criterion met'}); "
             f"residual {residual_rms_mm:.4f} mm RMS",
         )
-    if hints:
-        return verdict("poor_fit", EXIT_POOR_FIT, f"FAILED: the data look wrong; {size}")
     if implausible:
         shown = ", ".join(implausible[:5]) + (" ..." if len(implausible) > 5 else "")
         return verdict(
