@@ -18,7 +18,7 @@ from scipy.optimize import least_squares
 from bench.machines import BenchMachine
 from calib.identify import identify
 from calib.model import CalibrationModel
-from twin.kinematics_fast import one_blas_thread
+from twin.kinematics.structure import one_blas_thread
 
 SCIPY_OPTIONS = {"method": "lm", "jac": "2-point", "x_scale": "jac", "ftol": 1e-14, "xtol": 1e-12}
 

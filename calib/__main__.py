@@ -43,7 +43,6 @@ import sys
 from pathlib import Path
 
 from calib import cmd_compensate, cmd_export
-from calib.atomic_files import json_text
 from calib.cli_common import (
     positive_int,
     print_verdict,
@@ -70,7 +69,8 @@ from calib.workflow import (
     result_content,
     verify_result,
 )
-from calib.write_set import write_files
+from common.atomic_files import json_text
+from common.write_set import write_files
 from twin.exceptions import TwinError
 
 

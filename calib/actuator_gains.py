@@ -6,10 +6,10 @@ injected joint zero moves it): for the command ``c`` the joint takes
 
     q = q0 + (c - q0)(1 + g),          so          c = q0 + (q - q0) / (1 + g),
 
-the gains of one actuator adding up. The geometry's Jacobian (twin.sensitivity_batch) holds
+the gains of one actuator adding up. The geometry's Jacobian (twin.kinematics.sensitivity_batch) holds
 the joint values; the gains enter through them, so with ``J_a`` the column of actuator
 ``a``'s joint (a joint zero of it moves the targets as its joint value does:
-twin.kinematics_inverse_batch.actuator_joint_parameters):
+twin.kinematics.inverse_batch.actuator_joint_parameters):
 
 * a gain's column is ``J_a (c_a - q0_a)``, per pose;
 * a joint zero of a gained actuator's joint also moves ``q0``: the joint's travel from the
@@ -27,7 +27,7 @@ import mujoco
 import numpy as np
 
 from twin.exceptions import ParameterError
-from twin.kinematics_inverse_batch import actuator_joint_parameters
+from twin.kinematics.inverse_batch import actuator_joint_parameters
 from twin.mechanism import Mechanism
 from twin.parameters import KINDS, Parameter, ParameterSet
 

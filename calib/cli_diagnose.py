@@ -9,14 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import json_text
 from calib.cli_common import print_verdict, run_fit
 from calib.dataset import DatasetError, read_dataset
 from calib.dataset_select import select_set, subset
 from calib.effect_kinds import effect_content
 from calib.verdict import EXIT_OK
 from calib.workflow import CalibrationRun, rejected_rows
-from calib.write_set import write_files
+from common.atomic_files import json_text
+from common.write_set import write_files
 
 
 def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[object, str] | None:

@@ -30,15 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import json_text
 from calib.compensate_poses import Compensation, compensate
 from calib.desired_poses import DesiredPoses, DesiredPosesError, read_desired_poses
 from calib.effect_kinds import EffectFileError, load_effect
 from calib.identified_machine import IdentifiedMachine, load_identified_machine
 from calib.identify import model_from_files
 from calib.verdict import EXIT_OK, EXIT_UNREACHABLE
-from calib.write_set import write_files
-from twin.kinematics import forward
+from common.atomic_files import json_text
+from common.write_set import write_files
+from twin.kinematics.single_pose import forward
 from twin.rotations import matrix_from_rpy, rpy_from_matrix
 
 FRAMES = ("base", "tracker")

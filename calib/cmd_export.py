@@ -7,7 +7,7 @@ Writes the nominal MJCF with the identified errors in its geometry (body positio
 orientations, joint zeros as ``ref``, reflector sites; every other line as it was), after
 checking that its forward kinematics equals the identified model's to 1e-9 m at commands
 spread over the workspace; with ``--dh-out``, for a model generated from a DH table
-(python -m twin.dh_table), the calibrated DH table. ``verify --model M_calibrated.xml``
+(python -m twin.formats.dh_table), the calibrated DH table. ``verify --model M_calibrated.xml``
 without ``--result`` then scores it as it is on new readings. Exit 0, or 2 with the cause
 and nothing written.
 """

@@ -2,7 +2,7 @@
 
 The one path from desired poses to actuator commands on any machine (serial, parallel or
 hybrid): each pose checked against the workspace box the model declares (if any), then the
-exact inverse kinematics (twin.kinematics.inverse, the scenarios' own), then the strokes
+exact inverse kinematics (twin.kinematics.single_pose.inverse, the scenarios' own), then the strokes
 (a revolute actuator past its range by a whole turn is turned back: the same pose).
 A pose that fails is named with the reason, in the units of files: which actuator and by
 how much it would leave its stroke, the axis that leaves the workspace, or an inverse
@@ -21,8 +21,8 @@ import numpy as np
 
 from calib.identified_machine import IdentifiedMachine
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import forward, inverse, pose_to_frame
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward, inverse, pose_to_frame
 from twin.mechanism import Mechanism
 from twin.rotations import rotation_angle
 from twin.workspace import check_pose_in_box

@@ -14,8 +14,8 @@ import numpy as np
 
 from calib.compensate_poses import solve_each
 from calib.model import CalibrationModel
-from twin.kinematics import inverse
-from twin.kinematics_inverse_batch import actuator_twist_jacobians, inverse_near
+from twin.kinematics.inverse_batch import actuator_twist_jacobians, inverse_near
+from twin.kinematics.single_pose import inverse
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
 from twin.workspace import commands_for_poses
 
@@ -90,7 +90,7 @@ class TwistCompensation:
         twists = self.twist_jacobians[:, :, np.asarray(columns)] @ np.asarray(delta, dtype=float)
         corrected = corrected_poses(self.poses, twists)
         # every pose at once, each from its first inverse kinematics (the same exact inverse
-        # kinematics as twin.kinematics.inverse, to round-off; the same errors)
+        # kinematics as twin.kinematics.single_pose.inverse, to round-off; the same errors)
         joints = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
         return self.model.commands_for_joints(self.base_values, joints)
 

@@ -1,7 +1,7 @@
 """CSV + JSON sidecar reading and writing for :mod:`calib.dataset`.
 
 File units are millimetres and degrees; the returned :class:`~calib.dataset.Dataset`
-is SI. Both files are written as one set (:mod:`calib.write_set`: both or neither), with the
+is SI. Both files are written as one set (:mod:`common.write_set`: both or neither), with the
 mode of an ordinary file (0644 less the umask). Both are read as UTF-8 (a UTF-8 byte-order
 mark is accepted); another encoding, another delimiter than ',' or a malformed cell raises
 :class:`~calib.dataset.DatasetError` naming the file, line and column.
@@ -29,8 +29,8 @@ from calib.dataset import (
     check_names,
     sidecar_path,
 )
-from calib.write_set import write_files
-from twin.parameter_file import closest, read_utf8
+from common.write_set import write_files
+from twin.formats.parameter_file import closest, read_utf8
 
 CMD_PREFIX = "cmd:"
 REQUIRED_COLUMNS = ("pose_id", "set", "target", "repeat", "x_mm", "y_mm", "z_mm")

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from calib.exceptions import CalibError
-from twin.parameter_file import closest, read_utf8
+from twin.formats.parameter_file import closest, read_utf8
 
 POSITION = ("x_mm", "y_mm", "z_mm")
 ORIENTATION = ("rx_deg", "ry_deg", "rz_deg")

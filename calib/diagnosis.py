@@ -81,7 +81,7 @@ from calib.diagnosis_verdict import (
 from calib.identify import IdentificationResult, Observations
 from calib.model import CalibrationModel
 from calib.rank_structure import describe
-from twin.kinematics_fast import on_one_blas_thread
+from twin.kinematics.structure import on_one_blas_thread
 
 __all__ = [
     "GRAVITY_SKIPPED",

@@ -22,8 +22,8 @@ from calib.diagnosis_candidates import NO_SHAPE, Candidate, default_candidates, 
 from calib.diagnosis_context import actuator_offsets, build_context
 from calib.identify import IdentificationResult
 from calib.model import CalibrationModel
-from twin.sensitivity import target_jacobian
-from twin.sensitivity_batch import target_jacobian_batch
+from twin.kinematics.sensitivity import target_jacobian
+from twin.kinematics.sensitivity_batch import target_jacobian_batch
 
 
 def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
@@ -35,7 +35,7 @@ def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.nda
 
 
 def actuator_jacobians_batch(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
-    """:func:`actuator_jacobians` by the batched adjoint (twin.sensitivity_batch): the same
+    """:func:`actuator_jacobians` by the batched adjoint (twin.kinematics.sensitivity_batch): the same
     derivatives to round-off (1e-12 relative, tested), all poses at once."""
     mech = model.mechanism(values)
     offsets = actuator_offsets(model)

@@ -22,10 +22,10 @@ import numpy as np
 
 from calib.diagnosis_gravity import GravityLoads, gravity_loads
 from calib.model import CalibrationModel
-from twin.closure import update_kinematics
+from twin.kinematics.closure import update_kinematics
+from twin.kinematics.sensitivity import target_jacobian
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import matrix_from_quat
-from twin.sensitivity import target_jacobian
 
 SITE_POS = 2
 BODY_ROT = 1

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import write_with_atomic
+from common.atomic_files import write_with_atomic
 
 
 def save_diagnosis_png(diag, path: str | Path) -> Path:

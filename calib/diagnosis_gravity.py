@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.closure import closure_jacobian, update_kinematics
+from twin.kinematics.closure import closure_jacobian, update_kinematics
 from twin.mechanism import Mechanism
 
 STANDARD_GRAVITY = np.array([0.0, 0.0, -9.80665])

@@ -48,7 +48,7 @@ from calib.robust import (
     suspect_outliers,
 )
 from twin.exceptions import ClosureError
-from twin.kinematics_fast import one_blas_thread
+from twin.kinematics.structure import one_blas_thread
 from twin.mechanism import Mechanism
 from twin.parameters import Parameter
 from twin.workspace import check_command_strokes
@@ -467,7 +467,7 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
 
 def model_from_files(mjcf: str, params_file: str) -> CalibrationModel:
     """A calibration model from an MJCF file and an error-model TOML file."""
-    from twin.parameter_file import load_parameter_set
+    from twin.formats.parameter_file import load_parameter_set
 
     mech = Mechanism.from_xml(mjcf)
     return CalibrationModel(mech, load_parameter_set(params_file, mech.model))

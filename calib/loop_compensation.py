@@ -19,7 +19,7 @@ import numpy as np
 from calib.exceptions import ConvergenceError
 from calib.loop_effect import ActuatorCorrection
 from calib.model import CalibrationModel
-from twin.kinematics_inverse_batch import commands_near
+from twin.kinematics.inverse_batch import commands_near
 from twin.workspace import commands_for_poses
 
 
@@ -69,7 +69,7 @@ def loop_commands(
     ``near``: closed configurations (N, nq) of the same poses on a nearby model (e.g. the
     controller's, a calibration's estimate away) and their actuator twist Jacobians
     (N, 6, A): the inverse kinematics then solves every pose at once from them
-    (twin.kinematics_inverse_batch.commands_near, the same solutions to round-off)."""
+    (twin.kinematics.inverse_batch.commands_near, the same solutions to round-off)."""
     mech = model.mechanism(values)
     if near is None:
         q_star = commands_for_poses(mech, poses)

@@ -2,7 +2,7 @@
 
 It predicts tracker-target positions for actuator commands under given parameter values
 (closed-chain forward kinematics of the injected model) and their identification Jacobian
-(implicit-function form over the closed chain, all poses at once: twin.sensitivity_batch).
+(implicit-function form over the closed chain, all poses at once: twin.kinematics.sensitivity_batch).
 Actuator gains among the parameters map the commands to joint values first, and their
 columns are assembled beside the geometric ones (calib.actuator_gains); everything that asks
 the model (identify, verify, the compensation) sees commands in and commands out.
@@ -15,14 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.actuator_gains import ColumnPlan, GainMap
-from twin.kinematics_batch import forward_batch
-from twin.mechanism import Mechanism
-from twin.parameters import ParameterSet
-from twin.sensitivity_batch import (
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity_batch import (
     JacobianPlan,
     target_jacobian_batch,
     tool_twist_jacobian_batch,
 )
+from twin.mechanism import Mechanism
+from twin.parameters import ParameterSet
 from twin.workspace import check_command_strokes, solve_poses
 
 
@@ -144,7 +144,7 @@ class CalibrationModel:
 
     def tool_twist_jacobian(self, values: np.ndarray, qpos: np.ndarray) -> np.ndarray:
         """d(tool pose error twist)/d(values) (N, 6, n) at the closed configurations ``qpos``
-        (N, nq) of the model at ``values`` (twin.sensitivity_batch.tool_twist_jacobian_batch
+        (N, nq) of the model at ``values`` (twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch
         with the gains' columns)."""
         mech = self.mechanism(values)
         if self.gains is None:

@@ -1,10 +1,10 @@
 """The calibrated model as files a controller or simulator takes: MJCF and DH table.
 
-The nominal MJCF with the identified errors written into its geometry (twin.mjcf_values),
+The nominal MJCF with the identified errors written into its geometry (twin.formats.mjcf_values),
 compiled again and its forward kinematics compared with the identified model's at commands
 spread over what the machine reaches: the file is written only if they agree to
 ``FK_TOLERANCE_M``. For a model generated from a DH table, the calibrated table as well
-(twin.dh_extract). Nothing is written when any part fails.
+(twin.formats.dh_extract). Nothing is written when any part fails.
 
 Actuator gains (``identify --with`` a diagnosis that named them) are no geometry: an MJCF
 joint's value is its command. The file then holds the identified geometry, its kinematics
@@ -23,13 +23,13 @@ import numpy as np
 
 from calib.exceptions import CalibError
 from calib.identified_machine import IdentifiedMachine
-from calib.write_set import write_files
-from twin.dh_extract import dh_table_of, format_dh_table
+from common.write_set import write_files
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import forward
-from twin.kinematics_batch import forward_batch
+from twin.formats.dh_extract import dh_table_of, format_dh_table
+from twin.formats.mjcf_values import WrittenMjcf, mjcf_with_values, with_header
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
-from twin.mjcf_values import WrittenMjcf, mjcf_with_values, with_header
 from twin.parameters import ParameterSet
 from twin.rotations import rotation_angle
 from twin.workspace import random_poses
@@ -173,7 +173,7 @@ def _header(machine: IdentifiedMachine, model_path: Path, w: WrittenMjcf, c: Kin
 
 
 def calibrated_dh_text(machine: IdentifiedMachine, model_path: Path) -> str:
-    """The calibrated DH table of a model generated from one (twin.dh_extract)."""
+    """The calibrated DH table of a model generated from one (twin.formats.dh_extract)."""
     table = dh_table_of(machine.mechanism.model, source=str(model_path))
     return format_dh_table(
         table,
@@ -182,7 +182,7 @@ def calibrated_dh_text(machine: IdentifiedMachine, model_path: Path) -> str:
             f"errors identified in {machine.result.path.name}, written by python -m calib export",
             "the joint value q is the commanded value, as before: theta (R) and d (P) include "
             "the identified encoder offsets",
-            f"generate its model: python -m twin.dh_table THIS.csv --name "
+            f"generate its model: python -m twin.formats.dh_table THIS.csv --name "
             f"{machine.nominal.name} --out-dir DIR",
         ),
     )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from twin.kinematics import pose_to_frame
+from twin.kinematics.single_pose import pose_to_frame
 from twin.mechanism import Mechanism
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from calib.exceptions import IdentifiabilityError
 from calib.identifiability import RANK_RTOL, ZERO_RTOL, column_scale, scaled_jacobian
-from twin.kinematics_fast import one_blas_thread
+from twin.kinematics.structure import one_blas_thread
 
 INDICES = ("product", "condition", "min_singular", "noise_amplification", "d_optimality")
 MAXIMISE = {

@@ -19,7 +19,7 @@ import numpy as np
 
 from calib.exceptions import IdentifiabilityError
 from calib.identifiability import RANK_RTOL, scaled_jacobian
-from twin.kinematics_fast import on_one_blas_thread
+from twin.kinematics.structure import on_one_blas_thread
 
 
 @dataclass(frozen=True)

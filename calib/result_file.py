@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import json_text, write_json_atomic
 from calib.exceptions import CalibError
 from calib.prior import correlation_matrix
 from calib.registration import Registration, RegistrationError
+from common.atomic_files import json_text, write_json_atomic
 
 FORMAT = "pkm-calib-result"
 VERSION = 1

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from twin.kinematics import pose_to_frame
+from twin.kinematics.single_pose import pose_to_frame
 from twin.rigid_fit import fit_rigid_transform
 from twin.rotations import rotation_angle
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from twin.closure import update_kinematics
+from twin.kinematics.closure import update_kinematics
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
 from twin.rotations import matrix_from_quat

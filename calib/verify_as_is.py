@@ -19,15 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import json_text
 from calib.dataset import Dataset, read_dataset
 from calib.dataset_select import CALIBRATION, select_set
 from calib.identify import bind_dataset
 from calib.registration import Registration, initial_registration
 from calib.verdict import EXIT_OK
 from calib.verify import Side, score_side
-from calib.write_set import write_files
-from twin.kinematics_batch import forward_batch
+from common.atomic_files import json_text
+from common.write_set import write_files
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 
 

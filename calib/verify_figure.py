@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.atomic_files import write_with_atomic
 from calib.verify import Verification
+from common.atomic_files import write_with_atomic
 
 
 def save_verification_png(v: Verification, path: str | Path) -> Path:

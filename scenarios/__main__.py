@@ -24,7 +24,7 @@ def _shown(path: Path) -> str:
 
 def _os_message(exc: OSError) -> str:
     """What a file error says: ResultsWriteError's sentence, else its cause and file."""
-    from calib.write_set import WriteSetError
+    from common.write_set import WriteSetError
     from scenarios.results_folder import ResultsWriteError, describe_os_error
 
     if isinstance(exc, (ResultsWriteError, WriteSetError)):

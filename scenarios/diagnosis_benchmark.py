@@ -66,10 +66,10 @@ from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.sweep_draws import map_draws
 from scenarios.truth_draw import TruthSpec, draw_truth
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -17,23 +17,23 @@ from typing import Any
 
 import numpy as np
 
-from calib.atomic_files import write_text_atomic
 from calib.compensation import reachable_compensated_commands
 from calib.exceptions import CalibError
 from calib.identify import IdentificationResult, bind_dataset, identify
 from calib.model import CalibrationModel
 from calib.model_export import kinematics_difference
 from calib.scoring import error_stats, pose_errors
+from common.atomic_files import write_text_atomic
 from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png
 from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.twin_datasets import measured_dataset, through_file
-from twin.kinematics import pose_to_frame
-from twin.kinematics_batch import forward_batch
+from twin.formats.mjcf_values import mjcf_with_values
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import pose_to_frame
 from twin.mechanism import Mechanism
-from twin.mjcf_values import mjcf_with_values
 from twin.tracker import PoseNoise, Tracker, TrackerNoise
 from twin.workspace import grid_poses, random_poses
 

@@ -48,8 +48,8 @@ from scenarios.recording import Recorder
 from scenarios.sweep_draws import map_draws
 from scenarios.sweep_engine import ENV_ENGINE, engine_env
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import inverse
-from twin.kinematics_fast import one_blas_thread
+from twin.kinematics.single_pose import inverse
+from twin.kinematics.structure import one_blas_thread
 from twin.rotations import matrix_from_rotvec, rpy_from_matrix
 from twin.workspace import layer_poses
 

@@ -46,7 +46,7 @@ from scenarios.liu_vs_ols_pipeline import (
 from scenarios.liu_vs_ols_sentences import estimator_parameters
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
-from twin.kinematics_fast import one_blas_thread
+from twin.kinematics.structure import one_blas_thread
 from twin.parameters import KINDS, ParameterSet
 
 # Tolerances of the paper match (ours / paper, on all three layers as Table 5 reports them):

@@ -22,7 +22,7 @@ from calib.loop_compensation import loop_commands
 from calib.loop_effect import ActuatorCorrection, diagnosed_correction
 from calib.loop_fit import LoopFit, fit_with_effect, residual_rms_3d
 from scenarios.liu_vs_ols_pipeline import Bench, Calibration
-from twin.kinematics_fast import on_one_blas_thread
+from twin.kinematics.structure import on_one_blas_thread
 
 
 @dataclass(frozen=True)

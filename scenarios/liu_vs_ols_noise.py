@@ -30,7 +30,7 @@ from calib.estimators.liu import Liu
 from calib.estimators.liu_paper_units import LiuPaperUnits
 from calib.estimators.ols import OLS
 from calib.nominal_targets import nominal_targets
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
 
 MC_CHUNK = 2000  # Monte Carlo runs projected at once
 

@@ -30,9 +30,9 @@ from calib.model import CalibrationModel
 from calib.scoring import PoseErrors, max_mean_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
-from twin.kinematics_batch import forward_batch
-from twin.kinematics_fast import one_blas_thread
-from twin.kinematics_inverse_batch import commands_near
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.inverse_batch import commands_near
+from twin.kinematics.structure import one_blas_thread
 from twin.measurement import measure as twin_measure
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import checked_commands, layer_poses

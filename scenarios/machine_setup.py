@@ -24,8 +24,8 @@ from twin.effects import (
     TrackerAirTemperature,
 )
 from twin.exceptions import ModelError, ParameterError
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import ParameterSet
 
 # effects a scenario can switch on in the truth (``truth.effects``), by ``kind``; their

@@ -32,8 +32,8 @@ from scenarios.recording import Recorder
 from scenarios.serial_arm import _cli, _joints, _tracker
 from scenarios.truth_draw import TruthSpec, draw_truth
 from scenarios.twin_datasets import tracker_frame_dataset
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 
 
 def _verified(common: list[str], result: Path, out: Path, log: Path) -> tuple[int, dict]:

@@ -34,10 +34,10 @@ from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.sweep_draws import map_draws
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity_batch import tool_twist_jacobian_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
-from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.tracker import PoseNoise
 from twin.workspace import boundary_poses, grid_poses, random_poses
 

@@ -22,7 +22,7 @@ from scenarios.config import Scenario
 from scenarios.machine_setup import load_nominal
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
-from twin.kinematics import forward
+from twin.kinematics.single_pose import forward
 from twin.workspace import commands_for_poses, layer_poses
 
 # The paper's Table 2: irreducible parameters per limb (54 in all).

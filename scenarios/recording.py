@@ -47,7 +47,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from calib.atomic_files import write_bytes_atomic
+from common.atomic_files import write_bytes_atomic
 from scenarios.recording_blueprints import Bounds, ErrorMap, Logged, Series, build_blueprint
 from twin.mechanism import Mechanism
 
@@ -699,8 +699,8 @@ def _log_pose_set(
     group: str,
     scale: float,
 ) -> None:
-    from twin.kinematics import pose_to_frame
-    from twin.kinematics_batch import forward_batch
+    from twin.kinematics.batch import forward_batch
+    from twin.kinematics.single_pose import pose_to_frame
 
     sol = forward_batch(mech, commands)
     local = mech.target_local()

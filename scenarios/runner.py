@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from calib.atomic_files import write_json_atomic, write_text_atomic
+from common.atomic_files import write_json_atomic, write_text_atomic
 from scenarios.config import REPO_ROOT, Scenario, ScenarioError, load_scenario
 from scenarios.progress import Progress
 from scenarios.recording import Recorder

@@ -34,9 +34,9 @@ from scenarios.recording import Recorder
 from scenarios.serial_arm_loop import close_the_loop
 from scenarios.truth_draw import TruthSpec, draw_truth
 from scenarios.twin_datasets import tracker_frame_dataset
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
 
 

@@ -35,10 +35,10 @@ from calib.model_export import kinematics_difference
 from calib.position_error import stats_mm
 from calib.registration import initial_registration
 from scenarios.config import Scenario
-from twin.dh_mjcf import build_xml, exact
-from twin.dh_table import read_dh_table
-from twin.kinematics import forward
-from twin.kinematics_batch import forward_batch
+from twin.formats.dh_mjcf import build_xml, exact
+from twin.formats.dh_table import read_dh_table
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 from twin.rotations import rpy_from_matrix
 from twin.tracker import Tracker

@@ -22,8 +22,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from calib.atomic_files import write_json_atomic, write_text_atomic
-from calib.write_set import staged
+from common.atomic_files import write_json_atomic, write_text_atomic
+from common.write_set import staged
 from scenarios.config import REPO_ROOT, ScenarioError, load_scenario
 from scenarios.sweep_aggregate import aggregate
 from scenarios.sweep_engine import engine_env, make_engine

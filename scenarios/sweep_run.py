@@ -16,7 +16,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from calib.atomic_files import plain_json, write_json_atomic, write_text_atomic
+from common.atomic_files import plain_json, write_json_atomic, write_text_atomic
 from scenarios.config import Scenario, load_scenario
 from scenarios.progress import Progress
 from scenarios.recording import Recorder

@@ -25,7 +25,7 @@ from scenarios.machine_setup import build_effects, load_machine
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
 from scenarios.twin_datasets import measured_dataset, through_file
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -10,8 +10,8 @@ import numpy as np
 from calib.__main__ import main
 from calib.dataset import write_dataset
 from scenarios.twin_datasets import measured_dataset
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

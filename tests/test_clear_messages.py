@@ -20,8 +20,8 @@ from scenarios import serial_arm
 from scenarios.config import ScenarioError
 from scenarios.runner import run_scenario
 from scenarios.twin_datasets import measured_dataset, tracker_frame_dataset
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -17,10 +17,10 @@ from to_machine_support import MODELS, ROOT, plausible_values, result_file
 
 from calib.__main__ import main
 from calib.registration import Registration
-from twin.kinematics import forward, pose_to_frame
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward, pose_to_frame
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.rotations import matrix_from_rpy, rotation_angle, rpy_from_matrix
 from twin.workspace import random_poses
 

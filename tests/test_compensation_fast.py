@@ -15,11 +15,11 @@ import pytest
 from calib.compensation import TwistCompensation, twist_compensated_commands
 from calib.model import CalibrationModel
 from twin.exceptions import WorkspaceError
-from twin.kinematics import inverse
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.sensitivity import tool_twist_jacobian
+from twin.kinematics.single_pose import inverse
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
-from twin.sensitivity import tool_twist_jacobian
 from twin.workspace import checked_commands, commands_for_poses, layer_poses
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -14,9 +14,9 @@ from calib.diagnosis import diagnose
 from calib.identify import Observations, identify
 from calib.model import CalibrationModel
 from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -30,9 +30,9 @@ from calib.model import CalibrationModel
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.effects import JointBacklash, JointCompliance, ThermalWarmup
 from twin.effects.encoder_eccentricity import EncoderEccentricity
+from twin.formats.parameter_file import load_parameter_set
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -14,7 +14,7 @@ from calib.exceptions import IdentifiabilityError
 from calib.identifiability import analyse
 from calib.identify import Observations, bind_dataset, identify
 from calib.model import CalibrationModel
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses
 

@@ -8,18 +8,18 @@ import mujoco
 import numpy as np
 import pytest
 
-import twin.kinematics as kinematics
-import twin.kinematics_batch as kinematics_batch
-from twin.closure import (
+import twin.kinematics.batch as kinematics_batch
+import twin.kinematics.single_pose as kinematics
+from twin.exceptions import ClosureError, ModelError, WorkspaceError
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.closure import (
     closure_jacobian,
     closure_residual,
     closure_sites,
     update_kinematics,
 )
-from twin.dof_axes import DofAxes
-from twin.exceptions import ClosureError, ModelError, WorkspaceError
-from twin.kinematics import forward, inverse, pose_to_frame
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.dof_axes import DofAxes
+from twin.kinematics.single_pose import forward, inverse, pose_to_frame
 from twin.mechanism import Mechanism
 from twin.rotations import rotvec_from_matrix, rpy_from_matrix
 from twin.workspace import random_poses

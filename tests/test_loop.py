@@ -10,8 +10,8 @@ from calib.loop_effect import diagnosed_correction
 from calib.loop_fit import fit_with_effect
 from calib.model import CalibrationModel
 from calib.nominal_targets import nominal_targets
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.workspace import commands_for_poses, layer_poses
 
 

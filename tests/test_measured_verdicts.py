@@ -274,9 +274,9 @@ def test_default_never_worse_than_plain_on_the_polisher(tmp_path):
     them weakly; keeping the weakest directions at zero must not cost held-out accuracy."""
     from calib.dataset import Dataset
     from calib.model import CalibrationModel
+    from twin.formats.parameter_file import load_parameter_set
     from twin.measurement import measure
     from twin.mechanism import Mechanism
-    from twin.parameter_file import load_parameter_set
     from twin.tracker import Tracker, TrackerNoise
     from twin.workspace import random_poses
 

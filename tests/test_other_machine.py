@@ -8,8 +8,8 @@ import pytest
 
 from calib.identify import Observations, identify
 from calib.model import CalibrationModel
-from twin.kinematics import forward, inverse
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.workspace import random_poses

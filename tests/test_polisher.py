@@ -15,11 +15,11 @@ from calib.reconstruction import correlation_reconstruction, spectral_reconstruc
 from calib.screw_polisher import PolisherScrewModel
 from scenarios.polisher_identifiability import fd_jacobian, group_relative_error
 from twin.exceptions import WorkspaceError
-from twin.kinematics import forward, inverse
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.sensitivity import target_jacobian, tool_twist_jacobian
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import rotvec_from_matrix
-from twin.sensitivity import target_jacobian, tool_twist_jacobian
 from twin.workspace import commands_for_poses, layer_poses
 
 ROOT = Path(__file__).resolve().parent.parent

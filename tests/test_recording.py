@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from scenarios.recording import Recorder, error_colors
-from twin.kinematics import forward
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -17,9 +17,9 @@ from calib.registration import (
     initial_registration,
     registration_jacobian,
 )
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import matrix_from_rotvec
 from twin.tracker import Tracker, TrackerNoise
 

@@ -304,7 +304,7 @@ def test_immutable_results_folder_exits_2(earlier, tmp_path, monkeypatch, capsys
 def test_recording_on_a_full_disk_raises_instead_of_hanging(tmp_path, monkeypatch):
     """The .rrd is written by Python (rerun encodes it in memory): a full disk is an
     OSError like any other, not a stalled rerun writer thread."""
-    from calib import atomic_files
+    import common.atomic_files as atomic_files
 
     def full(*args, **kwargs):
         raise os_error(ENOSPC)

@@ -19,7 +19,7 @@ from calib.exceptions import CalibError, TooManyOutliersError
 from calib.identify import Observations, Rejection, RobustOptions, identify, robust_scale
 from calib.model import CalibrationModel
 from calib.robust import suspect_outliers
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses
 

@@ -18,9 +18,9 @@ from calib.estimators.levenberg_marquardt import LMOptions, levenberg_marquardt
 from calib.identify import Observations, identify
 from calib.model import CalibrationModel
 from calib.registration import Registration, about, about_jacobian, identity
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.rotations import matrix_from_rotvec
 from twin.tracker import Tracker
 from twin.workspace import random_poses

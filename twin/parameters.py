@@ -14,7 +14,7 @@ A parameter is one scalar deviation from the nominal MJCF, of one of five kinds:
 The first four are geometry; a gain acts on the commands, not on the model: injection leaves
 it out, its screw is zero and it moves no site at a given configuration (its identification
 columns come from the calibration model, which maps commands to joint values through it).
-The Jacobians of twin.sensitivity and twin.sensitivity_batch refuse it.
+The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch refuse it.
 
 Values are SI (metres, radians, gains as plain numbers). Injection edits ``body_pos``,
 ``body_quat``, ``site_pos``, ``qpos0`` of a copy of the nominal model and calls
@@ -292,7 +292,7 @@ class ParameterSet:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`screws` for N poses at once, each (3, n, N), from frames with the poses
         last: ``xpos`` (3, nbody, N), ``xmat`` (3, 3, nbody, N), ``xanchor`` and ``xaxis``
-        (3, njnt, N) (twin.kinematics_tree.TreeFrames)."""
+        (3, njnt, N) (twin.kinematics.tree.TreeFrames)."""
         n_pose, n = xpos.shape[-1], len(self)
         t, w, o = (np.zeros((3, n, n_pose)) for _ in range(3))
         kind, el, axis = self.kind, self.element, self.axis

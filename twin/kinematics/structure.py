@@ -1,7 +1,7 @@
 """What batched kinematics reads once per machine, and the pieces its Newton steps share.
 
-* :class:`KinematicStructure`: the numpy kinematic tree's plan (twin.kinematics_tree), the
-  closure structure and its static pivots (twin.kinematics_reduced), index arrays. It depends
+* :class:`KinematicStructure`: the numpy kinematic tree's plan (twin.kinematics.tree), the
+  closure structure and its static pivots (twin.kinematics.reduced), index arrays. It depends
   only on the model's structure (bodies, joints, closures), so every model of one machine
   (each injected parameter set) shares one, kept in a small bounded memo;
 * :class:`FastKinematics`: one mechanism's structure plus what depends on its numbers (the
@@ -20,11 +20,11 @@ from typing import Any, TypeVar
 import mujoco
 import numpy as np
 
-from twin.closure import closure_jacobian, update_kinematics
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import MAX_STEP, forward
-from twin.kinematics_reduced import ClosureStructure
-from twin.kinematics_tree import TreeNumbers, TreePlan, tree_frames, tree_numbers
+from twin.kinematics.closure import closure_jacobian, update_kinematics
+from twin.kinematics.reduced import ClosureStructure
+from twin.kinematics.single_pose import forward
+from twin.kinematics.tree import TreeNumbers, TreePlan, tree_frames, tree_numbers
 from twin.mechanism import Mechanism
 from twin.rotations import matrix_from_quat, quat_from_rotvec, quat_multiply, rotvec_from_matrix
 
@@ -272,10 +272,6 @@ def integrate_soa(fk: FastKinematics, q: np.ndarray, step: np.ndarray) -> None:
         q[qa : qa + 4] = (quat / np.linalg.norm(quat, axis=1, keepdims=True)).T
 
 
-CURVATURE_MIN = 1024  # from this many cold starts on, the predictor's second-order term too
-CURVATURE_STEP = 1e-3  # finite-difference step of the curvature, in command units (m, rad)
-
-
 def difference_soa(fk: FastKinematics, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     """The step (n_free, N) that :func:`integrate_soa` takes from q0 to q1 (nq, N): the
     inverse of ``mj_integratePos`` over the free dofs (rotation vectors in the body frame for
@@ -296,65 +292,3 @@ def difference_soa(fk: FastKinematics, q0: np.ndarray, q1: np.ndarray) -> np.nda
         turn = quat_multiply(conj, q1[qa : qa + 4].T)
         out[rows] = rotvec_from_matrix(matrix_from_quat(turn)).T
     return out
-
-
-def curvature(fk: FastKinematics) -> np.ndarray | None:
-    """Second derivatives (n_free, A, A) of the closed chain's free dofs with respect to the
-    commands at the home configuration, by central differences of closed solutions (batched,
-    from the closed home configuration), or None when a difference point does not close.
-    Kept with the predictor: it depends on the model's numbers."""
-    pred = fk.predictor()
-    if pred is None:
-        return None
-    if fk._curvature_key == fk._predictor_key:
-        return fk._curvature
-    from twin.kinematics_batch import forward_batch  # (it calls this module)
-
-    home, home_cmd, _ = pred
-    a = len(home_cmd)
-    h = CURVATURE_STEP
-    signs = np.array([(1, 1), (1, -1), (-1, 1), (-1, -1)], dtype=float)
-    pairs = [(i, j) for i in range(a) for j in range(i, a)]
-    cmds = np.array(
-        [
-            home_cmd + h * (si * np.eye(a)[i] + sj * np.eye(a)[j])
-            for i, j in pairs
-            for si, sj in signs
-        ]
-    )
-    try:
-        sol = forward_batch(fk.mech, cmds, start=home, check_stroke=False)
-    except (ClosureError, WorkspaceError):
-        out = None
-    else:
-        d = difference_soa(fk, np.repeat(home[:, None], len(cmds), axis=1), sol.qpos.T)
-        d = d.reshape(d.shape[0], len(pairs), 4)
-        second = (d[..., 0] - d[..., 1] - d[..., 2] + d[..., 3]) / (4.0 * h * h)
-        out = np.zeros((d.shape[0], a, a))
-        for k, (i, j) in enumerate(pairs):
-            out[:, i, j] = out[:, j, i] = second[:, k]
-    fk._curvature, fk._curvature_key = out, fk._predictor_key
-    return out
-
-
-def predict_start(fk: FastKinematics, q: np.ndarray, commands: np.ndarray) -> None:
-    """Cold starts (nq, N) moved in place by the predictor: the first-order step along the
-    closed chain's sensitivity at home (FastKinematics.predictor) and, from CURVATURE_MIN
-    poses on, the second-order term of :func:`curvature`, which leaves Newton a start about
-    five times closer and saves it about half a step a pose (computing the curvature costs
-    about as much as solving a thousand poses saves, hence the threshold)."""
-    pred = fk.predictor()
-    if pred is None:
-        return
-    home, home_cmd, sens = pred
-    dc = (commands - home_cmd).T  # (A, N)
-    step = sens @ dc  # (n_free, N)
-    second = curvature(fk) if commands.shape[0] >= CURVATURE_MIN else None
-    if second is not None:
-        outer = (dc[:, None, :] * dc[None, :, :]).reshape(-1, dc.shape[1])  # (A * A, N)
-        step += 0.5 * (second.reshape(second.shape[0], -1) @ outer)
-    norm = np.sqrt(np.sum(step * step, axis=0))
-    step *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-300))
-    q[:] = home[:, None]
-    integrate_soa(fk, q, step)
-    q[fk.mech.actuator_qpos] = commands.T

@@ -8,14 +8,14 @@ the closed chain: with the actuators held, the closure c(q, pi) = 0 defines q(pi
 
 for the target positions y. A serial chain has no closure and no free dof: the implicit part
 vanishes and dy/dpi is the explicit term alone. Tests compare it with finite differences of
-the full solve. twin.sensitivity_batch computes the same for many poses at once.
+the full solve. twin.kinematics.sensitivity_batch computes the same for many poses at once.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from twin.closure import (
+from twin.kinematics.closure import (
     closure_jacobian,
     closure_sites,
     site_jacobians,
@@ -30,7 +30,7 @@ def _implicit(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, sites: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """dq_free/dpi and the explicit site derivatives (dp, dw) of ``sites``, at ``qpos``."""
-    require_geometry(params, "the identification Jacobian (twin.sensitivity)")
+    require_geometry(params, "the identification Jacobian (twin.kinematics.sensitivity)")
     update_kinematics(mech, qpos)
     a, b = closure_sites(mech)
     all_sites = np.concatenate([a, b, sites])
@@ -68,7 +68,7 @@ def tool_twist_jacobian(
 ) -> np.ndarray:
     """d(tool pose error twist)/d(parameters), (6, n): linear velocity of the tool point and
     angular velocity, world axes (the first paper's B of Eq. 7, from the twin). For many
-    poses, twin.sensitivity_batch.tool_twist_jacobian_batch (the tests' reference is this)."""
+    poses, twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch (the tests' reference is this)."""
     sites = np.array([mech.tool_site])
     dq, free, dp, dw = _implicit(mech, params, values, qpos, sites)
     jp, jr = site_jacobians(mech, sites)

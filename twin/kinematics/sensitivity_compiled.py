@@ -1,11 +1,11 @@
 """The identification Jacobian on the compiled kernel
-(twin.kinematics_compiled_kernels.jacobian_batch): the parameters' screws as the arrays the
+(twin.kinematics.kernels.jacobian_batch): the parameters' screws as the arrays the
 kernel reads, and the poses in chunks side by side on the kept pool.
 
-The kernel does per configuration what twin.sensitivity_batch does with arrays over poses
+The kernel does per configuration what twin.kinematics.sensitivity_batch does with arrays over poses
 (frames, screws, explicit term, the outputs' motion, the adjoint solve and its contraction),
 so no (poses x sites x parameters) array is formed in between. It covers serial chains and
-square closure systems; twin.sensitivity_batch keeps the numpy path for the others and as
+square closure systems; twin.kinematics.sensitivity_batch keeps the numpy path for the others and as
 the reference the tests compare against.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from twin.kinematics_compiled import (
+from twin.kinematics.compiled import (
     CompiledPlan,
     compiled_numbers,
     int_array,
@@ -23,10 +23,10 @@ from twin.kinematics_compiled import (
     processors,
     run_chunks,
 )
-from twin.kinematics_fast import FastKinematics
+from twin.kinematics.structure import FastKinematics
 from twin.parameters import ParameterSet, left_jacobian_so3
 
-# the kernel's screw kinds (twin.kinematics_compiled_kernels.screws)
+# the kernel's screw kinds (twin.kinematics.kernels.screws)
 SHIFT, TURN, HINGE, SLIDE = 0, 1, 2, 3
 PARALLEL_MIN = 64  # fewer poses than this: one thread
 
@@ -78,7 +78,7 @@ def jacobian_compiled(
     (N, nq) of ``fk``'s machine (with ``values`` injected): the outputs are the sites
     ``sites`` (O,), their positions (rows x, y, z) and with ``angular`` their rotations
     (3 more rows), ``moves`` (O, n_free) says which free dof moves which of them."""
-    from twin.kinematics_compiled_kernels import jacobian_batch  # compiles on first use
+    from twin.kinematics.kernels import jacobian_batch  # compiles on first use
 
     model = fk.model
     cs = fk.closure

@@ -1,11 +1,11 @@
 """The compiled kernels' side in Python: the arrays they read, built from the MJCF.
 
-twin.kinematics_batch calls :func:`solve_compiled` (forward kinematics), and
-twin.sensitivity_compiled the identification Jacobian's kernel, for every machine whose
+twin.kinematics.batch calls :func:`solve_compiled` (forward kinematics), and
+twin.kinematics.sensitivity_compiled the identification Jacobian's kernel, for every machine whose
 closure system the kernels handle (all but an under-determined reduced system, and for the
 Jacobian an over-determined one: those go through the numpy path). The structure arrays
 (tree, closures, elimination columns, joint motions) depend only on the machine's
-structure and are kept with its :class:`~twin.kinematics_fast.KinematicStructure`; the
+structure and are kept with its :class:`~twin.kinematics.structure.KinematicStructure`; the
 numbers (body and joint frames, site offsets) are read from the model at every call, so an
 edited model (an injected error, an effect) is followed exactly as by ``mj_kinematics``.
 """
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.kinematics_fast import FastKinematics, model_fingerprint
+from twin.kinematics.structure import FastKinematics, model_fingerprint
 
 FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 BALL = int(mujoco.mjtJoint.mjJNT_BALL)
@@ -123,7 +123,7 @@ def _build_plan(fk: FastKinematics) -> CompiledPlan | None:
 
 
 def _rotations(quat: np.ndarray) -> np.ndarray:
-    """(K, 3, 3) from quaternions (K, 4), normalised (as twin.kinematics_tree)."""
+    """(K, 3, 3) from quaternions (K, 4), normalised (as twin.kinematics.tree)."""
     q = quat / np.linalg.norm(quat, axis=1, keepdims=True)
     w, x, y, z = q.T
     out = np.empty((len(q), 3, 3))
@@ -186,12 +186,12 @@ def solve_compiled(
     """Forward kinematics of the starts ``qs`` (n, nq) (actuators at their commands), in place
     on every array: qs the closed configurations, out_pos (n, S, 3) the output sites,
     out_rot (n, 3, 3) the tool's rotation, residual and iterations (n,). ``settings``: the
-    Newton's (tolerance, accept, max_iter, max_step), those of twin.kinematics.
+    Newton's (tolerance, accept, max_iter, max_step), those of twin.kinematics.single_pose.
 
     The kernel works on arrays of this call's own, copied in and out: numba counts the
     references to an array's buffer atomically at every view and call, and threads sharing
     one buffer (halves of one batch, the model's numbers) would contend for its count."""
-    from twin.kinematics_compiled_kernels import newton_batch  # compiles on first use
+    from twin.kinematics.kernels import newton_batch  # compiles on first use
 
     own = own_copy
     q = qs.copy()
@@ -259,42 +259,3 @@ def run_chunks(work: Callable[[slice], None], chunks: Sequence[slice]) -> None:
         return
     for f in [_shared_pool(len(chunks)).submit(work, sl) for sl in chunks]:
         f.result()
-
-
-WARM_UP_MODEL = """
-<mujoco>
-  <worldbody>
-    <body name="crank">
-      <joint name="j1" type="hinge" axis="0 0 1"/>
-      <site name="tip" pos="0.3 0 0"/>
-      <site name="tool" pos="0.2 0 0"/>
-    </body>
-    <body name="held">
-      <freejoint/>
-      <site name="end"/>
-      <site name="target_1" pos="0 0 0.1"/>
-    </body>
-  </worldbody>
-  <equality><weld site1="end" site2="tip"/></equality>
-  <actuator><position name="crank" joint="j1"/></actuator>
-</mujoco>
-"""
-
-
-def warm_up() -> None:
-    """Compile the kernels (forward kinematics, the identification Jacobian) into numba's
-    cache now (``make setup`` calls this: the first compilation takes tens of seconds, which
-    a test run or a scenario should not pay)."""
-    from twin.kinematics_batch import forward_batch
-    from twin.mechanism import Mechanism
-    from twin.parameters import Parameter, ParameterSet
-    from twin.sensitivity_batch import target_jacobian_batch
-
-    mech = Mechanism.from_xml_string(WARM_UP_MODEL)
-    solution = forward_batch(mech, np.array([[0.1]]))
-    params = ParameterSet([Parameter("tip_x", "site_pos", "tip", (1.0, 0.0, 0.0))], mech.model)
-    target_jacobian_batch(mech, params, np.zeros(1), solution.qpos)
-
-
-if __name__ == "__main__":
-    warm_up()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from twin.kinematics_tree import dofs_moving_sites
+from twin.kinematics.tree import dofs_moving_sites
 from twin.mechanism import Mechanism
 
 FREE = int(mujoco.mjtJoint.mjJNT_FREE)

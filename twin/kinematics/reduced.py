@@ -13,8 +13,8 @@ of a 36 x 36 one.
 Everything is read from the model (which dof moves which site, joint kinds), so every machine
 goes through this one code path; a structure the elimination does not fit (a closure with more
 private columns than rows, a dof in no closure) treats every dof as shared, which is the full
-system. Arrays are "structure of arrays" with the configurations last (twin.kinematics_tree).
-Elimination is numpy vectorised over configurations (twin.small_systems): no per-configuration
+system. Arrays are "structure of arrays" with the configurations last (twin.kinematics.tree).
+Elimination is numpy vectorised over configurations (twin.kinematics.small_systems): no per-configuration
 LAPACK call. Pivots are static (chosen once by partial pivoting at the home configuration, for
 each closure and for the square reduced system) and checked in every solve; a system whose
 pivot fails the threshold test is redone by Householder reflections.
@@ -28,9 +28,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.kinematics_tree import FREE, HINGE, TreeFrames, as_index, dofs_moving_sites
-from twin.mechanism import Mechanism
-from twin.small_systems import (  # eliminate_static: the tests replace it here
+from twin.kinematics.small_systems import (  # eliminate_static: the tests replace it here
     back_substitute,
     eliminate,
     eliminate_static,
@@ -38,6 +36,8 @@ from twin.small_systems import (  # eliminate_static: the tests replace it here
     solve_dense,
     solve_square,
 )
+from twin.kinematics.tree import FREE, HINGE, TreeFrames, as_index, dofs_moving_sites
+from twin.mechanism import Mechanism
 
 BALL = int(mujoco.mjtJoint.mjJNT_BALL)
 AXIS_JOINT, AXIS_WORLD, AXIS_BODY = 0, 1, 2  # a dof's axis: joint xaxis, world e_k, body column
@@ -327,7 +327,7 @@ class ClosureStructure:
         """Choose the static pivots at one configuration (``frames`` of N = 1, e.g. home):
         each closure's rows by partial pivoting on its private columns, then the rows of the
         square reduced system by partial pivoting on it (and on its transpose, for the
-        adjoint solves of twin.kinematics_adjoint)."""
+        adjoint solves of twin.kinematics.adjoint)."""
         rhs = np.zeros((self.n_closure, 1, 1))
         mats = self.matrices(frames, site_pos, rhs)
         for g, (grp, mat) in enumerate(zip(self.groups, mats, strict=True)):

@@ -34,8 +34,8 @@ import mujoco
 import numpy as np
 
 from twin.exceptions import ModelError
+from twin.formats.mjcf_numbers import canonical_quat, snap
 from twin.mechanism import BOUND_INERTIA, BOUND_MASS
-from twin.mjcf_numbers import canonical_quat, snap
 from twin.parameters import HINGE, ParameterSet
 from twin.rotations import matrix_from_quat, quat_multiply
 

@@ -1,15 +1,15 @@
-"""The identification Jacobian of many poses at once (twin.sensitivity, vectorised).
+"""The identification Jacobian of many poses at once (twin.kinematics.sensitivity, vectorised).
 
-Same mathematics as :func:`twin.sensitivity.target_jacobian` and
-:func:`twin.sensitivity.tool_twist_jacobian` (screws of the parameters, the
+Same mathematics as :func:`twin.kinematics.sensitivity.target_jacobian` and
+:func:`twin.kinematics.sensitivity.tool_twist_jacobian` (screws of the parameters, the
 implicit-function theorem over the closures), computed for all poses together: the frames
-from the numpy kinematic tree (twin.kinematics_tree), the screws as arrays over poses and
+from the numpy kinematic tree (twin.kinematics.tree), the screws as arrays over poses and
 parameters, and the implicit term ``-J_t (dc/dq)^-1 dc/dpi`` through one adjoint solve per
-output coordinate (twin.kinematics_adjoint), contracted only over the (site, parameter)
+output coordinate (twin.kinematics.adjoint), contracted only over the (site, parameter)
 pairs that move. The tests hold it equal to the per-pose function to round-off.
 
 Where the compiled kernel covers the machine (a serial chain or a square closure system),
-the same steps run pose by pose in machine code instead (twin.sensitivity_compiled); the
+the same steps run pose by pose in machine code instead (twin.kinematics.sensitivity_compiled); the
 arrays over poses here serve over-determined closures and are the kernel's reference.
 """
 
@@ -19,21 +19,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.kinematics_adjoint import adjoint_solve
-from twin.kinematics_compiled import compiled_plan
-from twin.kinematics_fast import (
+from twin.kinematics.adjoint import adjoint_solve
+from twin.kinematics.compiled import compiled_plan
+from twin.kinematics.reduced import ClosureStructure, cross_soa
+from twin.kinematics.sensitivity_compiled import jacobian_compiled
+from twin.kinematics.structure import (
     KinematicStructure,
     fast_kinematics,
     kinematic_structure,
     one_blas_thread,
 )
-from twin.kinematics_reduced import ClosureStructure, cross_soa
-from twin.kinematics_tree import TreeFrames, dofs_moving_sites, tree_frames
+from twin.kinematics.tree import TreeFrames, dofs_moving_sites, tree_frames
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet, require_geometry
-from twin.sensitivity_compiled import jacobian_compiled
 
-COMPILED = True  # the compiled kernel (twin.sensitivity_compiled) where it covers the machine
+COMPILED = (
+    True  # the compiled kernel (twin.kinematics.sensitivity_compiled) where it covers the machine
+)
 CHUNK = 256  # poses per pass: bounds the (poses x sites x parameters) arrays
 
 
@@ -74,7 +76,7 @@ class Outputs:
 def frames_at(model, qpos: np.ndarray) -> dict[str, np.ndarray]:
     """Body, joint and site frames (leading pose axis, MuJoCo's field names and shapes) at
     configurations ``qpos`` (N, nq), from the numpy kinematic tree."""
-    from twin.kinematics_tree import TreePlan
+    from twin.kinematics.tree import TreePlan
 
     frames = tree_frames(TreePlan(model), model, np.ascontiguousarray(np.atleast_2d(qpos).T))
     return _aos(model, frames, np.arange(model.nsite))
@@ -222,7 +224,7 @@ def tool_twist_jacobian_batch(
 ) -> np.ndarray:
     """d(tool pose error twist)/d(parameters) at closed configurations ``qpos`` (N, nq):
     (N, 6, n), the linear velocity of the tool point then the angular velocity, world axes
-    (:func:`twin.sensitivity.tool_twist_jacobian` of every pose). ``mech`` carries the model
+    (:func:`twin.kinematics.sensitivity.tool_twist_jacobian` of every pose). ``mech`` carries the model
     with ``values`` injected; ``plan`` (from the nominal machine) may be reused."""
     plan = plan or JacobianPlan.for_mechanism(mech)
     out = Outputs(np.array([mech.tool_site], dtype=int), plan.tool_moves, angular=True)
@@ -233,7 +235,7 @@ def _batched(
     mech: Mechanism, params: ParameterSet, values: np.ndarray, qpos: np.ndarray, out: Outputs
 ) -> np.ndarray:
     """:func:`_chunk` over ``qpos`` (N, nq) in chunks of CHUNK poses: (N, O*rows, n)."""
-    require_geometry(params, "the identification Jacobian (twin.sensitivity_batch)")
+    require_geometry(params, "the identification Jacobian (twin.kinematics.sensitivity_batch)")
     qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
     if not len(qpos):
         return np.zeros((0, len(out.sites) * out.rows, len(params)))

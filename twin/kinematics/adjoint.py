@@ -3,7 +3,7 @@
 The identification Jacobian needs ``J_t J^-1 c_pi`` (target motion of the dofs, the closure
 Jacobian's inverse, the closures' parameter derivatives): one right-hand side per parameter
 forwards, but only one per target coordinate through the adjoint, ``(J^-T J_t^T)^T c_pi``.
-The elimination of twin.kinematics_reduced run with an identity right-hand side gives each
+The elimination of twin.kinematics.reduced run with an identity right-hand side gives each
 closure's row transform ``T`` (``T A = [U; 0]`` for its private columns ``A``), and with it
 
     z_c = T_c^T [U_c^-T b_c ; w_c],   sum_c B_red,c^T w_c = b_s - sum_c B_top,c^T U_c^-T b_c
@@ -11,20 +11,20 @@ closure's row transform ``T`` (``T A = [U; 0]`` for its private columns ``A``), 
 for the private right-hand sides ``b_c`` and the shared ones ``b_s``: triangular solves, one
 small reduced system per configuration and products, no 36 x 36 factorisation. The reduced
 systems (transposed) are solved like the forward ones, vectorised over configurations
-(twin.small_systems.solve_square: static pivots chosen for the transpose at the home
+(twin.kinematics.small_systems.solve_square: static pivots chosen for the transpose at the home
 configuration, Householder where one is refused), not by a LAPACK call per configuration.
 Square systems only (the identification of an exactly constrained machine); the caller
 falls back otherwise (least squares by the forward elimination). Layout as in
-twin.kinematics_reduced (configurations last).
+twin.kinematics.reduced (configurations last).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from twin.kinematics_reduced import ClosureStructure
-from twin.kinematics_tree import TreeFrames
-from twin.small_systems import solve_square
+from twin.kinematics.reduced import ClosureStructure
+from twin.kinematics.small_systems import solve_square
+from twin.kinematics.tree import TreeFrames
 
 
 def adjoint_solve(

@@ -1,13 +1,13 @@
-"""The DH table of a model generated from one (``twin.dh_table``), read back from its bodies.
+"""The DH table of a model generated from one (``twin.formats.dh_table``), read back from its bodies.
 
-A model built by ``twin.dh_mjcf`` keeps one DH row in two bodies per link (``link{i}_dh``
+A model built by ``twin.formats.dh_mjcf`` keeps one DH row in two bodies per link (``link{i}_dh``
 and ``link{i}``), so the table can be read back from any compiled model of it, in particular
 from one with identified errors injected: that is the calibrated DH table a controller takes.
 ``dh_table_of`` checks that each body still has the DH form (a rotation about x or z only,
 an offset along x or z only); an error model that moves a body in another direction (the
-complete error model of ``twin.error_model``, say) leaves a geometry no DH row can hold,
+complete error model of ``twin.formats.error_model``, say) leaves a geometry no DH row can hold,
 and the error names the body and the direction. ``format_dh_table`` writes the table in the
-CSV format ``twin.dh_table`` reads, every digit kept, so that the round trip is exact.
+CSV format ``twin.formats.dh_table`` reads, every digit kept, so that the round trip is exact.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import math
 import mujoco
 import numpy as np
 
-from twin.dh_table import DHJoint, DHSite, DHTable, DHTableError
+from twin.formats.dh import DHJoint, DHSite, DHTable, DHTableError
 from twin.rotations import matrix_from_quat, rpy_from_matrix
 
 TOL = 1e-12  # metres / quaternion components: what the DH form allows off its axes
@@ -62,7 +62,7 @@ def _convention(model: mujoco.MjModel) -> str:
     base, dh1, link1 = (_body(model, n) for n in ("base", "link1_dh", "link1"))
     if base is None or dh1 is None or link1 is None:
         raise DHStructureError(
-            "the model was not generated from a DH table (python -m twin.dh_table): it has no "
+            "the model was not generated from a DH table (python -m twin.formats.dh_table): it has no "
             "bodies 'base', 'link1_dh' and 'link1'"
         )
     if model.body_parentid[link1] == dh1 and model.body_parentid[dh1] == base:
@@ -93,7 +93,7 @@ def _site(model: mujoco.MjModel, s: int, flange: int) -> DHSite:
 
 
 def dh_table_of(model: mujoco.MjModel, source: str = "<model>") -> DHTable:
-    """The DH table whose MJCF (``twin.dh_mjcf``) ``model`` is; raises DHStructureError
+    """The DH table whose MJCF (``twin.formats.dh_mjcf``) ``model`` is; raises DHStructureError
     naming the body when ``model`` does not have that form."""
     convention = _convention(model)
     modified = convention == "modified"
@@ -151,7 +151,7 @@ def _num(x: float) -> str:
 
 
 def format_dh_table(table: DHTable, comments: tuple[str, ...] = ()) -> str:
-    """The CSV text of ``table`` in ``twin.dh_table``'s format (mm, deg; every digit)."""
+    """The CSV text of ``table`` in ``twin.formats.dh_table``'s format (mm, deg; every digit)."""
     deg, mm = math.degrees, (lambda v: v * 1e3)
     lines = [f"# {c}" for c in comments]
     lines.append(f"# convention: {table.convention}")

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.closure import closure_jacobian, closure_residual, update_kinematics
 from twin.exceptions import ClosureError, WorkspaceError
+from twin.kinematics.closure import closure_jacobian, closure_residual, update_kinematics
 from twin.mechanism import Mechanism
 from twin.rotations import matrix_from_rpy, rotvec_from_matrix
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import mujoco
 
 from twin.exceptions import ModelError
+from twin.formats.parameter_file import read_utf8
 from twin.mechanism import compile_spec
-from twin.parameter_file import read_utf8
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 
@@ -97,7 +97,7 @@ def read_urdf(path: str | Path) -> Urdf:
 
 def body_of_link(urdf: Urdf, link: str) -> int:
     """The body id of ``link``; the error names the URDF and the closest link."""
-    from twin.parameter_file import closest
+    from twin.formats.parameter_file import closest
 
     b = mujoco.mj_name2id(urdf.model, mujoco.mjtObj.mjOBJ_BODY, link)
     if b < 0:

@@ -1,9 +1,9 @@
 """Serial arms from their DH table (CSV): an MJCF model and its error model, one command.
 
-    python -m twin.dh_table TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
+    python -m twin.formats.dh_table TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
         [--no-target-errors] [--base-errors]
 
-writes ``DIR/NAME.xml`` and ``DIR/NAME.params.toml`` (atomically). ``twin.dh_mjcf`` says
+writes ``DIR/NAME.xml`` and ``DIR/NAME.params.toml`` (atomically). ``twin.formats.dh_mjcf`` says
 how the model is built and which parameter is which.
 
 Table format (UTF-8 CSV; blank lines and lines starting with ``#`` are skipped)::
@@ -36,15 +36,14 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import math
 import re
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
-from twin.dh_mjcf import build_parameters, build_xml
-from twin.parameter_file import closest, read_utf8
+from twin.formats.dh import DHJoint, DHSite, DHTable, DHTableError
+from twin.formats.dh_mjcf import build_parameters, build_xml
+from twin.formats.parameter_file import closest, read_utf8
 
 CONVENTIONS = ("standard", "modified")
 JOINT_REQUIRED = ("joint", "alpha_deg", "a_mm", "d_mm", "theta_deg", "min_deg", "max_deg")
@@ -54,57 +53,6 @@ SITE_OPTIONAL = ("rx_deg", "ry_deg", "rz_deg")
 _CONVENTION = re.compile(r"#\s*convention\s*:\s*(.*)$", re.IGNORECASE)
 _TARGET = re.compile(r"target_[A-Za-z0-9_]+$")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*$")
-
-
-class DHTableError(ValueError):
-    """A DH table that cannot be read; the message names file, line and column."""
-
-
-@dataclass(frozen=True)
-class DHJoint:
-    """One row, SI: alpha, theta in rad; a, d in m; limits and home in rad (R) or m (P)."""
-
-    name: str
-    type: str
-    alpha: float
-    a: float
-    d: float
-    theta: float
-    lower: float
-    upper: float
-    home: float
-
-
-@dataclass(frozen=True)
-class DHSite:
-    """A point (and orientation, rotations about fixed x, y, z) in its frame, SI."""
-
-    name: str
-    pos: tuple[float, float, float]
-    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
-class DHTable:
-    convention: str
-    joints: tuple[DHJoint, ...]
-    tool: DHSite
-    targets: tuple[DHSite, ...]
-    base: DHSite = DHSite("base", (0.0, 0.0, 0.0))
-    source: str = "<table>"
-
-    def with_targets(self, names: list[str] | tuple[str, ...]) -> DHTable:
-        """The same arm with only the reflectors ``names``, in that order."""
-        known = {t.name: t for t in self.targets}
-        for n in names:
-            if n not in known:
-                raise DHTableError(
-                    f"{self.source}: no reflector '{n}'{closest(n, known)}; "
-                    f"the table has {list(known)}"
-                )
-        if not names or len(set(names)) != len(names):
-            raise DHTableError(f"{self.source}: choose distinct reflectors, got {list(names)}")
-        return dataclasses.replace(self, targets=tuple(known[n] for n in names))
 
 
 class _Reader:
@@ -277,7 +225,9 @@ def read_dh_table(path: str | Path) -> DHTable:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m twin.dh_table", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m twin.formats.dh_table", description=__doc__.split("\n")[0]
+    )
     ap.add_argument("table", help="DH table (CSV)")
     ap.add_argument("--name", required=True, help="model name: NAME.xml, NAME.params.toml")
     ap.add_argument("--out-dir", default=".", help="where to write (default: .)")
@@ -303,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     # the project's one writer of file sets; it lives in calib but depends on nothing there
-    from calib.write_set import write_files
+    from common.write_set import write_files
 
     out = Path(args.out_dir)
     xml, toml = out / f"{args.name}.xml", out / f"{args.name}.params.toml"

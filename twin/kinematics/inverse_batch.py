@@ -6,16 +6,16 @@ iteration on the actuator commands themselves:
 
     c_{k+1} = c_k + J^-1 e(c_k),     e = [p_goal - p_tool, rotvec(R_goal R_tool^T)],
 
-with the tool pose of c_k from the batched exact forward kinematics (twin.kinematics_batch)
+with the tool pose of c_k from the batched exact forward kinematics (twin.kinematics.batch)
 and J = d(tool twist)/d(actuator joints) (6 x A, world axes) held at the known configuration.
 The error contracts by about |J(c) - J(c_0)| / |J| per step (1e-4 for a tenth of a
 millimetre on a machine of a metre): a few steps reach round-off, where the iteration stops
 (the residual no longer halves). A pose whose tool error is then not below the single-pose
-solver's tolerance (twin.kinematics.TOLERANCE), or any pose of a machine without as many
-actuators as tool degrees of freedom (6), is solved by twin.kinematics.inverse from its known
+solver's tolerance (twin.kinematics.single_pose.TOLERANCE), or any pose of a machine without as many
+actuators as tool degrees of freedom (6), is solved by twin.kinematics.single_pose.inverse from its known
 configuration, so the result is always that of an exact inverse kinematics on the same
 assembly branch, and the errors (unreachable pose, command outside its stroke) are those of
-twin.kinematics.inverse.
+twin.kinematics.single_pose.inverse.
 """
 
 from __future__ import annotations
@@ -25,13 +25,13 @@ from collections.abc import Sequence
 import numpy as np
 
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import TOLERANCE, check_commands, inverse, pose_to_frame
-from twin.kinematics_batch import forward_batch
-from twin.kinematics_fast import one_blas_thread
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity_batch import tool_twist_jacobian_batch
+from twin.kinematics.single_pose import TOLERANCE, check_commands, inverse, pose_to_frame
+from twin.kinematics.structure import one_blas_thread
 from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import rotvec_from_matrix
-from twin.sensitivity_batch import tool_twist_jacobian_batch
 from twin.workspace import check_labels, check_pose_in_box, checked_commands, pose_name
 
 MAX_STEPS = 12
@@ -73,7 +73,7 @@ def inverse_near(
     each solved from the nearby closed configuration ``start`` (N, nq); ``jacobians``
     (N, 6, A) of :func:`actuator_twist_jacobians` at ``start`` when already computed.
 
-    ``check_stroke``: raise WorkspaceError, as twin.kinematics.inverse does, for the first
+    ``check_stroke``: raise WorkspaceError, as twin.kinematics.single_pose.inverse does, for the first
     pose whose commands leave a stroke."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     start = np.atleast_2d(np.asarray(start, dtype=float))

@@ -1,13 +1,13 @@
-"""Batched forward kinematics: the same Newton as twin.kinematics, many poses at once.
+"""Batched forward kinematics: the same Newton as twin.kinematics.single_pose, many poses at once.
 
 A serial chain (no free dof) needs no Newton: one kinematics pass.
 
-Two engines, the same algorithm: by default the compiled kernels (twin.kinematics_compiled:
+Two engines, the same algorithm: by default the compiled kernels (twin.kinematics.compiled:
 each pose's whole Newton in machine code, chunks of poses side by side on threads, since the
 kernels release the GIL), else the numpy path, vectorised over poses. There each Newton step
-computes the frames of every pose with the numpy kinematic tree (twin.kinematics_tree:
+computes the frames of every pose with the numpy kinematic tree (twin.kinematics.tree:
 MuJoCo's ``mj_kinematics`` vectorised over poses), the closure residual and Jacobian from
-them, and the step by elimination per closure (twin.kinematics_reduced: each limb's private
+them, and the step by elimination per closure (twin.kinematics.reduced: each limb's private
 joints eliminated, a small system over the shared ones); numpy holds the GIL between its many
 short operations, so a second thread adds at most ~10 %. Steps, damping of long steps,
 tolerance, stall rule and failure are those of the single-pose solve; each pose is checked
@@ -25,8 +25,7 @@ import mujoco
 import numpy as np
 
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import ACCEPT, MAX_ITER, MAX_STEP, TOLERANCE, check_commands
-from twin.kinematics_compiled import (
+from twin.kinematics.compiled import (
     CompiledPlan,
     compiled_numbers,
     compiled_plan,
@@ -35,16 +34,17 @@ from twin.kinematics_compiled import (
     run_chunks,
     solve_compiled,
 )
-from twin.kinematics_fast import (
+from twin.kinematics.single_pose import ACCEPT, MAX_ITER, MAX_STEP, TOLERANCE, check_commands
+from twin.kinematics.structure import (
     PREDICT_MIN,
     FastKinematics,
     closure_residual_soa,
+    difference_soa,
     fast_kinematics,
     integrate_soa,
     one_blas_thread,
-    predict_start,
 )
-from twin.kinematics_tree import TreeFrames, tree_frames
+from twin.kinematics.tree import TreeFrames, tree_frames
 from twin.mechanism import Mechanism
 from twin.rotations import quat_from_rotvec, quat_multiply
 
@@ -99,7 +99,7 @@ def forward_batch(
     ``start``: one configuration (nq,) or one per pose (N, nq), e.g. the previous solution
     when the same poses are solved again for slightly different parameters. ``nthread``: 0
     for one thread per processor (used only for many poses), else at most that many.
-    ``compiled``: the compiled kernels (twin.kinematics_compiled) where they cover the machine,
+    ``compiled``: the compiled kernels (twin.kinematics.compiled) where they cover the machine,
     else (or when False) the numpy path; both give the same solutions to round-off.
     """
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
@@ -289,3 +289,67 @@ def _store(
     out[:, 0, :, ids] = np.moveaxis(pos, -1, 0)
     rot = frames.site_rotations(m, fk.out_sites[:1], part)  # (3, 3, 1, k)
     out[:, 1:, 0, ids] = rot[:, :, 0]
+
+
+CURVATURE_MIN = 1024  # from this many cold starts on, the predictor's second-order term too
+CURVATURE_STEP = 1e-3  # finite-difference step of the curvature, in command units (m, rad)
+
+
+def curvature(fk: FastKinematics) -> np.ndarray | None:
+    """Second derivatives (n_free, A, A) of the closed chain's free dofs with respect to the
+    commands at the home configuration, by central differences of closed solutions (batched,
+    from the closed home configuration), or None when a difference point does not close.
+    Kept with the predictor: it depends on the model's numbers."""
+    pred = fk.predictor()
+    if pred is None:
+        return None
+    if fk._curvature_key == fk._predictor_key:
+        return fk._curvature
+    home, home_cmd, _ = pred
+    a = len(home_cmd)
+    h = CURVATURE_STEP
+    signs = np.array([(1, 1), (1, -1), (-1, 1), (-1, -1)], dtype=float)
+    pairs = [(i, j) for i in range(a) for j in range(i, a)]
+    cmds = np.array(
+        [
+            home_cmd + h * (si * np.eye(a)[i] + sj * np.eye(a)[j])
+            for i, j in pairs
+            for si, sj in signs
+        ]
+    )
+    try:
+        sol = forward_batch(fk.mech, cmds, start=home, check_stroke=False)
+    except (ClosureError, WorkspaceError):
+        out = None
+    else:
+        d = difference_soa(fk, np.repeat(home[:, None], len(cmds), axis=1), sol.qpos.T)
+        d = d.reshape(d.shape[0], len(pairs), 4)
+        second = (d[..., 0] - d[..., 1] - d[..., 2] + d[..., 3]) / (4.0 * h * h)
+        out = np.zeros((d.shape[0], a, a))
+        for k, (i, j) in enumerate(pairs):
+            out[:, i, j] = out[:, j, i] = second[:, k]
+    fk._curvature, fk._curvature_key = out, fk._predictor_key
+    return out
+
+
+def predict_start(fk: FastKinematics, q: np.ndarray, commands: np.ndarray) -> None:
+    """Cold starts (nq, N) moved in place by the predictor: the first-order step along the
+    closed chain's sensitivity at home (FastKinematics.predictor) and, from CURVATURE_MIN
+    poses on, the second-order term of :func:`curvature`, which leaves Newton a start about
+    five times closer and saves it about half a step a pose (computing the curvature costs
+    about as much as solving a thousand poses saves, hence the threshold)."""
+    pred = fk.predictor()
+    if pred is None:
+        return
+    home, home_cmd, sens = pred
+    dc = (commands - home_cmd).T  # (A, N)
+    step = sens @ dc  # (n_free, N)
+    second = curvature(fk) if commands.shape[0] >= CURVATURE_MIN else None
+    if second is not None:
+        outer = (dc[:, None, :] * dc[None, :, :]).reshape(-1, dc.shape[1])  # (A * A, N)
+        step += 0.5 * (second.reshape(second.shape[0], -1) @ outer)
+    norm = np.sqrt(np.sum(step * step, axis=0))
+    step *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-300))
+    q[:] = home[:, None]
+    integrate_soa(fk, q, step)
+    q[fk.mech.actuator_qpos] = commands.T

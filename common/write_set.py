@@ -24,7 +24,7 @@ import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
-from calib.atomic_files import ordinary_mode
+from common.atomic_files import ordinary_mode
 
 Writer = Callable[[Path], None]
 
