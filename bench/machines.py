@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.identify import Observations
+from calib.fit.observations import Observations
 from scenarios.config import REPO_ROOT
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.formats.parameter_file import load_parameter_set, load_values

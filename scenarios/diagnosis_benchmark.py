@@ -11,9 +11,9 @@ A *case* is (machine, twin effect kind or "none", magnitude multiplier, seed). F
    magnitude), is ``multiplier`` times the tracker noise sigma (per coordinate);
 3. calibration, test and audit poses measured in one sequence (calibration, then test, then
    audit: the measurement order continues, so time effects keep growing);
-4. geometric identification (``calib.identify.identify``, without outlier rejection: the
+4. geometric identification (``calib.fit.identification.identify``, without outlier rejection: the
    noise is Gaussian, there are no gross outliers to reject, only the effect's own readings)
-   on the calibration set, then ``calib.diagnosis.diagnose`` with the test set as the user's
+   on the calibration set, then ``calib.diagnosis.core`` with the test set as the user's
    test set;
 5. scoring: the named effect against the truth kind through :data:`ACCEPTED` (twin kind ->
    the diagnosis's candidate names that are a right answer), and the 3D RMS error on the audit
@@ -43,10 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from calib.diagnosis import TestSet, diagnose, effect_offsets, effect_target_shifts
+from calib.diagnosis.core import TestSet, diagnose, effect_offsets, effect_target_shifts
 from calib.exceptions import CalibError
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
+from calib.fit.observations import Observations
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
 from scenarios.config import Scenario
 from scenarios.diagnosis_benchmark_aggregate import (
     ABSORBED_P,
@@ -264,9 +265,9 @@ def run_case(
 
 def _audit(model, result, diag, audit, audit_order, head) -> dict[str, Any]:
     """3D RMS on the audit poses, before and after adding the named effect: the actuator
-    effects through their offsets of the commands (calib.diagnosis.effect_offsets, exact
+    effects through their offsets of the commands (calib.diagnosis.core.effect_offsets, exact
     kinematics), the others through their shifts of the readings
-    (calib.diagnosis.effect_target_shifts), the geometry correction the diagnosis fitted
+    (calib.diagnosis.core.effect_target_shifts), the geometry correction the diagnosis fitted
     beside them linearly about the geometric fit, as it fitted it (so a correction along a
     direction the pose set hardly sees, in a redundant error model, is not amplified by a
     nonlinear re-solve). A kernel correction ("unexplained: ...") exists only inside the

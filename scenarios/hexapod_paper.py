@@ -17,12 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from calib.compensation import reachable_compensated_commands
+from calib.compensate.compensation import reachable_compensated_commands
 from calib.exceptions import CalibError
-from calib.identify import IdentificationResult, bind_dataset, identify
-from calib.model import CalibrationModel
-from calib.model_export import kinematics_difference
-from calib.scoring import error_stats, pose_errors
+from calib.fit.identification import IdentificationResult, identify
+from calib.fit.observations import bind_dataset
+from calib.fit.model import CalibrationModel
+from calib.compensate.model_export import kinematics_difference
+from calib.analysis.scoring import error_stats, pose_errors
 from common.atomic_files import write_text_atomic
 from scenarios.config import Scenario
 from scenarios.figures import parameter_bars_png

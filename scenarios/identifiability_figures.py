@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.identifiability import RANK_RTOL, scaled_jacobian
+from calib.analysis.identifiability import RANK_RTOL, scaled_jacobian
 from scenarios.figures import plt, save_png
 
 

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.compensation import TwistCompensation
+from calib.compensate.compensation import TwistCompensation
 from scenarios.config import PLACEMENTS, Scenario, load_scenario
 from scenarios.liu_vs_ols_pipeline import (
     CONTROL,

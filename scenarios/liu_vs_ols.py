@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from calib.compensation import TwistCompensation
-from calib.orientation_reach import orientation_reach
+from calib.compensate.compensation import TwistCompensation
+from calib.analysis.orientation import orientation_reach
 from scenarios.config import Scenario
 from scenarios.liu_vs_ols_loop import close_loop
 from scenarios.liu_vs_ols_noise import display_scale, eta_at_used, monte_carlo

@@ -1,11 +1,11 @@
 """The loop closed on the polisher: diagnose the fine residual, model the effect, refit, compensate.
 
 After the fine calibration (OLS on the identifiable set) the residual of the calibration
-layers goes to the residual diagnosis (calib.diagnosis). The effect it names becomes a
-correction of the actuator commands (calib.loop_effect); the full nonlinear model, geometry
+layers goes to the residual diagnosis (calib.diagnosis.core). The effect it names becomes a
+correction of the actuator commands (calib.loop.effect); the full nonlinear model, geometry
 of the identifiable set and the effect's coefficients together, is refitted to the same
-readings by Levenberg-Marquardt (calib.loop_fit), and the NC poses are compensated by the
-fixed-point inversion of the corrected model (calib.loop_compensation), then re-measured.
+readings by Levenberg-Marquardt (calib.loop.fit), and the NC poses are compensated by the
+fixed-point inversion of the corrected model (calib.loop.compensation), then re-measured.
 """
 
 from __future__ import annotations
@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from calib.diagnosis import Diagnosis, diagnose
-from calib.identifiability import analyse
-from calib.identify import IdentificationResult, Observations
-from calib.loop_compensation import loop_commands
-from calib.loop_effect import ActuatorCorrection, diagnosed_correction
-from calib.loop_fit import LoopFit, fit_with_effect, residual_rms_3d
+from calib.diagnosis.core import Diagnosis, diagnose
+from calib.analysis.identifiability import analyse
+from calib.fit.identification import IdentificationResult
+from calib.fit.observations import Observations
+from calib.loop.compensation import loop_commands
+from calib.loop.effect import ActuatorCorrection, diagnosed_correction
+from calib.loop.fit import LoopFit, fit_with_effect, residual_rms_3d
 from scenarios.liu_vs_ols_pipeline import Bench, Calibration
 from twin.kinematics.structure import on_one_blas_thread
 
@@ -41,7 +42,7 @@ class Loop:
         near: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
         """``near``: the poses' configurations and actuator twist Jacobians on a nearby model
-        (see calib.loop_compensation.loop_commands)."""
+        (see calib.loop.compensation.loop_commands)."""
         return loop_commands(
             bench.model, self.fit.values, self.fit.correction, poses, order, near=near
         ).commands

@@ -29,7 +29,7 @@ from calib.estimators.linear import DrawEstimator, LinearEstimate, draws
 from calib.estimators.liu import Liu
 from calib.estimators.liu_paper_units import LiuPaperUnits
 from calib.estimators.ols import OLS
-from calib.nominal_targets import nominal_targets
+from calib.two_step.nominal import nominal_targets
 from twin.kinematics.batch import forward_batch
 
 MC_CHUNK = 2000  # Monte Carlo runs projected at once

@@ -22,12 +22,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from calib.coarse import CoarseResult, coarse_calibration
-from calib.compensation import TwistCompensation
+from calib.two_step.coarse import CoarseResult, coarse_calibration
+from calib.compensate.compensation import TwistCompensation
 from calib.estimators.linear import LinearEstimate
-from calib.fine import FineProblem, estimate, fine_problem
-from calib.model import CalibrationModel
-from calib.scoring import PoseErrors, max_mean_stats, pose_errors
+from calib.two_step.fine import FineProblem, estimate, fine_problem
+from calib.fit.model import CalibrationModel
+from calib.analysis.scoring import PoseErrors, max_mean_stats, pose_errors
 from scenarios.config import Scenario
 from scenarios.machine_setup import ScenarioMachine, build_effects, load_machine
 from twin.kinematics.batch import forward_batch

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.model import CalibrationModel
+from calib.fit.model import CalibrationModel
 from scenarios.config import Scenario, ScenarioError, values_file_problems
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.effects import (

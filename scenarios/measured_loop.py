@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from calib.dataset import write_dataset
+from calib.data import write_dataset
 from scenarios.config import Scenario
 from scenarios.machine_setup import build_effects
 from scenarios.progress import Progress

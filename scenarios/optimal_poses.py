@@ -24,10 +24,11 @@ from typing import Any
 import numpy as np
 
 from calib.exceptions import CalibError
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
-from calib.observability import observability
-from calib.pose_selection import exchange, paper_selection, stopping_count
+from calib.fit.observations import Observations
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.analysis.observability_indices import observability
+from calib.analysis.pose_selection import exchange, paper_selection, stopping_count
 from scenarios.config import Scenario
 from scenarios.figures import index_vs_count_png
 from scenarios.machine_setup import load_machine

@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from calib.identifiability import analyse
-from calib.model import CalibrationModel
-from calib.reconstruction import correlation_reconstruction, spectral_reconstruction
-from calib.screw_polisher import PolisherScrewModel
+from calib.analysis.identifiability import analyse
+from calib.fit.model import CalibrationModel
+from calib.analysis.reconstruction import correlation_reconstruction, spectral_reconstruction
+from calib.analysis.screw_polisher import PolisherScrewModel
 from scenarios.config import Scenario
 from scenarios.machine_setup import load_nominal
 from scenarios.progress import Progress

@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from calib.__main__ import main as calib_main
-from calib.dataset import write_dataset
-from calib.registration import Registration
-from calib.result_file import load_result
+from calib.cli.commands import main as calib_main
+from calib.data import write_dataset
+from calib.fit.registration import Registration
+from calib.data.result_file import load_result
 from scenarios.config import Scenario, ScenarioError
 from scenarios.progress import Progress
 from scenarios.recording import Recorder
@@ -136,7 +136,7 @@ def _variant(
     result = json.loads(result_json.read_text())
     ver = json.loads(verify_json.read_text())
     loaded = load_result(result_json, expected_model=nominal.name)
-    from calib.dataset import read_dataset
+    from calib.data import read_dataset
 
     readings = read_dataset(data).readings.mean(axis=2)
     calibrated = nominal.with_model(params.inject(nominal.model, loaded.values_for(params)))

@@ -27,13 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from calib.compensate_poses import solve_each
-from calib.dataset import read_dataset
-from calib.dataset_select import select_set
-from calib.identify import bind_dataset
-from calib.model_export import kinematics_difference
-from calib.position_error import stats_mm
-from calib.registration import initial_registration
+from calib.compensate.poses import solve_each
+from calib.data import read_dataset
+from calib.data.select import select_set
+from calib.fit.observations import bind_dataset
+from calib.compensate.model_export import kinematics_difference
+from calib.fit.position_error import stats_mm
+from calib.fit.registration import initial_registration
 from scenarios.config import Scenario
 from twin.formats.dh_mjcf import build_xml, exact
 from twin.formats.dh_table import read_dh_table

@@ -15,11 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from calib.diagnosis import diagnose, effect_offsets, effect_target_shifts
-from calib.diagnosis_figure import save_diagnosis_png
-from calib.identify import bind_dataset, identify
-from calib.model import CalibrationModel
-from calib.scoring import max_mean_stats, pose_errors_between
+from calib.diagnosis.core import diagnose, effect_offsets, effect_target_shifts
+from calib.diagnosis.figure import save_diagnosis_png
+from calib.fit.observations import bind_dataset
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.analysis.scoring import max_mean_stats, pose_errors_between
 from scenarios.config import Scenario
 from scenarios.machine_setup import build_effects, load_machine
 from scenarios.progress import Progress

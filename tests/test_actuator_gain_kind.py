@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.compensation import compensated_commands
-from calib.identifiability import analyse
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel, ColumnJacobian
+from calib.compensate.compensation import compensated_commands
+from calib.analysis.identifiability import analyse
+from calib.fit.observations import Observations
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel, ColumnJacobian
 from twin.effects.actuator_gain import ActuatorGain
 from twin.exceptions import ParameterError
 from twin.formats.parameter_file import load_parameter_set, load_values

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.dataset import Dataset, DatasetError, read_dataset, sidecar_path, write_dataset
+from calib.data import Dataset, DatasetError, read_dataset, sidecar_path, write_dataset
 from twin.exceptions import ParameterError, WorkspaceError
 from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.__main__ import main
-from calib.dataset import sidecar_path, write_dataset
-from calib.verdict import EXIT_BAD_INPUT, EXIT_OK, EXIT_POOR_FIT
+from calib.cli.commands import main
+from calib.data import sidecar_path, write_dataset
+from calib.fit.verdict import EXIT_BAD_INPUT, EXIT_OK, EXIT_POOR_FIT
 from scenarios import serial_arm
 from scenarios.config import ScenarioError
 from scenarios.runner import run_scenario

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.__main__ import main
-from calib.data_hints import target_label_hint, unit_hint
-from calib.dataset import write_dataset
-from calib.verdict import (
+from calib.cli.commands import main
+from calib.data.hints import target_label_hint, unit_hint
+from calib.data import write_dataset
+from calib.fit.verdict import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
     EXIT_POOR_FIT,

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.compensation import TwistCompensation, twist_compensated_commands
-from calib.model import CalibrationModel
+from calib.compensate.compensation import TwistCompensation, twist_compensated_commands
+from calib.fit.model import CalibrationModel
 from twin.exceptions import WorkspaceError
 from twin.formats.parameter_file import load_parameter_set
 from twin.kinematics.sensitivity import tool_twist_jacobian
@@ -95,7 +95,7 @@ def test_prepared_inverse_kinematics_are_the_controllers_commands(polisher):
 
 def test_poses_corrected_at_once_equal_pose_by_pose():
     """Bitwise: the correction of Eq. (16) on whole arrays against each pose's own."""
-    from calib.compensation import corrected_poses
+    from calib.compensate.compensation import corrected_poses
 
     rng = np.random.default_rng(8)
     for n in (1, 9, 98):

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.diagnosis import TestSet, diagnose
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
+from calib.diagnosis.core import TestSet, diagnose
+from calib.fit.observations import Observations
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
 from twin.effects import LeadError, ThermalGrowth
 from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.kinematics.batch import forward_batch

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from to_machine_support import MODELS, ROOT, plausible_values, result_file
 
-from calib.__main__ import main
-from calib.dataset import write_dataset
-from calib.model_export import kinematics_difference, probe_commands
+from calib.cli.commands import main
+from calib.data import write_dataset
+from calib.compensate.model_export import kinematics_difference, probe_commands
 from scenarios.twin_datasets import measured_dataset
 from twin.formats.dh_extract import dh_table_of
 from twin.formats.dh_mjcf import build_xml, exact

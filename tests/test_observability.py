@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from calib.exceptions import IdentifiabilityError
-from calib.observability import INDICES, all_indices, better, index_with_each, observability
+from calib.analysis.observability_indices import (
+    INDICES,
+    all_indices,
+    better,
+    index_with_each,
+    observability,
+)
 
 
 def test_orthonormal_columns_are_ideal():

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.orientation_reach import deg_per_mm, orientation_reach
+from calib.analysis.orientation import deg_per_mm, orientation_reach
 from twin.formats.parameter_file import load_parameter_set
 from twin.kinematics.sensitivity import tool_twist_jacobian
 from twin.kinematics.single_pose import inverse

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from calib.exceptions import IdentifiabilityError
-from calib.identifiability import analyse
-from calib.model import CalibrationModel
-from calib.reconstruction import correlation_reconstruction, spectral_reconstruction
-from calib.screw_polisher import PolisherScrewModel
+from calib.analysis.identifiability import analyse
+from calib.fit.model import CalibrationModel
+from calib.analysis.reconstruction import correlation_reconstruction, spectral_reconstruction
+from calib.analysis.screw_polisher import PolisherScrewModel
 from scenarios.polisher_identifiability import fd_jacobian, group_relative_error
 from twin.exceptions import WorkspaceError
 from twin.formats.parameter_file import load_parameter_set
@@ -168,7 +168,7 @@ def test_one_node_identifies_only_the_encoders(polisher, params):
     """Three targets give the full pose, so H_xi has full rank even at one node (the paper:
     rank(H_xi) = f at nonsingular configurations); the structural errors are what is lost,
     and fine calibration refuses such a plan."""
-    from calib.fine import fine_problem
+    from calib.two_step.fine import fine_problem
 
     model = CalibrationModel(polisher, params)
     xi = np.array([n.endswith(".encoder") for n in params.names])

@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 
 from calib.exceptions import IdentifiabilityError
-from calib.observability import observability
-from calib.pose_selection import Selection, exchange, greedy, paper_selection, stopping_count
+from calib.analysis.observability_indices import observability
+from calib.analysis.pose_selection import (
+    Selection,
+    exchange,
+    greedy,
+    paper_selection,
+    stopping_count,
+)
 from scenarios.runner import run_scenario
 from twin.exceptions import WorkspaceError
 from twin.mechanism import Mechanism

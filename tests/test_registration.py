@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
-from calib.prior import Prior, PriorSpec, collinear_groups, weakly_identified
-from calib.registration import (
+from calib.fit.observations import Observations
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.prior import Prior, PriorSpec, collinear_groups, weakly_identified
+from calib.fit.registration import (
     Registration,
     RegistrationError,
     initial_registration,

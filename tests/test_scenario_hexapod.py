@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from calib.dataset import read_dataset
+from calib.data import read_dataset
 from scenarios.__main__ import main as cli
 from scenarios.config import ScenarioError, load_scenario
 from scenarios.runner import run_scenario

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from calib.__main__ import main as calib_cli
+from calib.cli.commands import main as calib_cli
 from scenarios.runner import run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -14,8 +14,8 @@ import pytest
 from fault_fs import ENOSPC, in_small_fs, os_error
 
 import common.write_set as write_set_module
-from calib.__main__ import main
-from calib.dataset import write_dataset
+from calib.cli.commands import main
+from calib.data import write_dataset
 from common.write_set import WriteSetError, write_files
 from scenarios.twin_datasets import measured_dataset
 from twin.formats.parameter_file import load_parameter_set, load_values

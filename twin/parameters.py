@@ -391,7 +391,7 @@ def require_geometry(params: ParameterSet, what: str) -> None:
         names = [params.names[k] for k in np.flatnonzero(params.is_gain)]
         raise ParameterError(
             f"{what} takes geometric parameters only; {names[:3]} are actuator gains, which "
-            "act through the commands (calib.model.CalibrationModel adds their columns)"
+            "act through the commands (calib.fit.model.CalibrationModel adds their columns)"
         )
 
 

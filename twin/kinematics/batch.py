@@ -80,7 +80,6 @@ def integrate_positions(model: mujoco.MjModel, qpos: np.ndarray, dq: np.ndarray)
     return out
 
 
-FIELDS = ("site_xpos", "site_xmat", "xaxis", "xanchor", "xmat")  # MuJoCo's frame fields
 CHUNK = 2048  # most poses solved together: long numpy operations, arrays mostly in cache
 CHUNK_ENTRIES = 2**19  # ... and at most about this many closure-matrix entries in a chunk
 PARALLEL_MIN = 2048  # fewer poses than this run on one thread (threads cost more)
