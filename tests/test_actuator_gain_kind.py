@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.compensate.compensation import compensated_commands
 from calib.analysis.identifiability import analyse
-from calib.fit.observations import Observations
+from calib.compensate.compensation import compensated_commands
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel, ColumnJacobian
+from calib.fit.observations import Observations
 from twin.effects.actuator_gain import ActuatorGain
 from twin.exceptions import ParameterError
 from twin.formats.parameter_file import load_parameter_set, load_values

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import scenarios.studies.serial_arm.study as serial_arm
 from calib.cli.commands import main
 from calib.data import sidecar_path, write_dataset
 from calib.fit.verdict import EXIT_BAD_INPUT, EXIT_OK, EXIT_POOR_FIT
-from scenarios import serial_arm
 from scenarios.config import ScenarioError
 from scenarios.runner import run_scenario
 from scenarios.twin_datasets import measured_dataset, tracker_frame_dataset

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from calib.cli.commands import main
-from calib.data.hints import target_label_hint, unit_hint
 from calib.data import write_dataset
+from calib.data.hints import target_label_hint, unit_hint
 from calib.fit.verdict import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,

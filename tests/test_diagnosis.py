@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from calib.diagnosis.core import diagnose
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
 from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.measurement import measure

@@ -10,15 +10,15 @@ from pathlib import Path
 import pytest
 
 from scenarios.config import ScenarioError, load_scenario
-from scenarios.diagnosis_benchmark import (
+from scenarios.machine_setup import EFFECTS
+from scenarios.runner import run_scenario
+from scenarios.studies.diagnosis_benchmark.study import (
     ACCEPTED,
     EFFECT_TYPES,
     SCALED,
     is_correct,
     not_applicable,
 )
-from scenarios.machine_setup import EFFECTS
-from scenarios.runner import run_scenario
 from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -66,7 +66,7 @@ def run(tmp_path_factory):
 
 def test_committed_file_is_a_meaningful_benchmark():
     s = load_scenario("diagnosis_benchmark")
-    from scenarios.diagnosis_benchmark import cases
+    from scenarios.studies.diagnosis_benchmark.study import cases
 
     args, skipped = cases(s)
     kinds = {a[3] for a in args}
@@ -105,7 +105,7 @@ def _case(kind, named, multiplier=3.0, machine="hexapod", absorbed=False, p=1e-9
 
 
 def test_absorbed_cases_are_counted_beside_the_rate_not_in_it():
-    from scenarios.diagnosis_benchmark import ABSORBED_P, aggregate
+    from scenarios.studies.diagnosis_benchmark.study import ABSORBED_P, aggregate
 
     results = [
         _case("backlash", "backlash"),

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from calib.diagnosis.core import TestSet, diagnose
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.effects import LeadError, ThermalGrowth
 from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.kinematics.batch import forward_batch

@@ -25,9 +25,9 @@ import numpy as np
 import pytest
 
 from calib.diagnosis.core import TestSet, diagnose, effect_offsets, effect_target_shifts
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.effects import JointBacklash, JointCompliance, ThermalWarmup
 from twin.effects.encoder_eccentricity import EncoderEccentricity

@@ -12,6 +12,16 @@ import pytest
 from calib.diagnosis.candidate import PoseRows
 from calib.diagnosis.candidates import library
 from calib.diagnosis.context import Context
+from calib.diagnosis.gravity import GravityLoads
+from calib.diagnosis.problem import (
+    RCOND,
+    Problem,
+    _orth,
+    fit,
+    fold_labels,
+    heldout_sse,
+    orth_and_pinv,
+)
 from calib.diagnosis.shape_scan import (
     INNER_FOLDS,
     _explained,
@@ -22,16 +32,6 @@ from calib.diagnosis.shape_scan import (
     rss_at,
     rss_over_grid,
 )
-from calib.diagnosis.problem import (
-    RCOND,
-    Problem,
-    _orth,
-    fit,
-    fold_labels,
-    heldout_sse,
-    orth_and_pinv,
-)
-from calib.diagnosis.gravity import GravityLoads
 
 N, T, A, P = 60, 3, 6, 12
 

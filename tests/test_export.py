@@ -18,8 +18,8 @@ import pytest
 from to_machine_support import MODELS, ROOT, plausible_values, result_file
 
 from calib.cli.commands import main
-from calib.data import write_dataset
 from calib.compensate.model_export import kinematics_difference, probe_commands
+from calib.data import write_dataset
 from scenarios.twin_datasets import measured_dataset
 from twin.formats.dh_extract import dh_table_of
 from twin.formats.dh_mjcf import build_xml, exact

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from to_machine_support import MODELS
 
-from calib.fit.model import CalibrationModel
 from calib.compensate.model_export import kinematics_difference, probe_commands
+from calib.fit.model import CalibrationModel
 from twin.formats.error_model import error_parameters
 from twin.formats.error_model import main as error_model_main
 from twin.formats.from_urdf import main as from_urdf_main

@@ -12,9 +12,9 @@ import pytest
 import twin.kinematics.single_pose as kinematics
 from calib.data import Dataset, DatasetError
 from calib.exceptions import IdentifiabilityError
-from calib.fit.observations import Observations, bind_dataset
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations, bind_dataset
 from twin.exceptions import ClosureError, ModelError, WorkspaceError
 from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.kinematics.batch import forward_batch

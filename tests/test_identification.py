@@ -9,12 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calib.analysis.identifiability import analyse
 from calib.data import Dataset, DatasetError
 from calib.exceptions import IdentifiabilityError
-from calib.analysis.identifiability import analyse
-from calib.fit.observations import Observations, bind_dataset
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations, bind_dataset
 from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses

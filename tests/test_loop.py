@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calib.fit.model import CalibrationModel
 from calib.loop.compensation import invert_correction, loop_commands
 from calib.loop.effect import diagnosed_correction
 from calib.loop.fit import fit_with_effect
-from calib.fit.model import CalibrationModel
 from calib.two_step.nominal import nominal_targets
 from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism

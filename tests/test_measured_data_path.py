@@ -16,8 +16,8 @@ import pytest
 
 from calib.cli.commands import main
 from calib.data import read_dataset, write_dataset
-from calib.data.select import subset
 from calib.data.result_file import load_result
+from calib.data.select import subset
 from scenarios.runner import run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.exceptions import IdentifiabilityError
 from calib.analysis.observability_indices import (
     INDICES,
     all_indices,
@@ -13,6 +12,7 @@ from calib.analysis.observability_indices import (
     index_with_each,
     observability,
 )
+from calib.exceptions import IdentifiabilityError
 
 
 def test_orthonormal_columns_are_ideal():

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.kinematics.batch import forward_batch
 from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.exceptions import IdentifiabilityError
 from calib.analysis.identifiability import analyse
-from calib.fit.model import CalibrationModel
 from calib.analysis.reconstruction import correlation_reconstruction, spectral_reconstruction
 from calib.analysis.screw_polisher import PolisherScrewModel
-from scenarios.polisher_identifiability import fd_jacobian, group_relative_error
+from calib.exceptions import IdentifiabilityError
+from calib.fit.model import CalibrationModel
+from scenarios.studies.polisher_identifiability.study import fd_jacobian, group_relative_error
 from twin.exceptions import WorkspaceError
 from twin.formats.parameter_file import load_parameter_set
 from twin.kinematics.sensitivity import target_jacobian, tool_twist_jacobian

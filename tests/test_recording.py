@@ -9,7 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from scenarios.recording import Recorder, error_colors
+from scenarios.recording.charts import error_colors
+from scenarios.recording.recorder import Recorder
 from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from calib.fit.prior import Prior, PriorSpec, collinear_groups, weakly_identified
 from calib.fit.registration import (
     Registration,

@@ -16,9 +16,9 @@ import pytest
 from calib.diagnosis.core import default_candidates, diagnose
 from calib.estimators.levenberg_marquardt import reweighted_levenberg_marquardt
 from calib.exceptions import CalibError, TooManyOutliersError
-from calib.fit.observations import Observations
 from calib.fit.identification import Rejection, RobustOptions, identify, robust_scale
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from calib.fit.robust import suspect_outliers
 from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism

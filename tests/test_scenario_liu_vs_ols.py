@@ -1,6 +1,6 @@
 """CI accuracy gates of the main scenario (issue: liu_vs_ols) and its summary contract.
 
-The scenario's truth is the paper's experiment regime (scenarios/liu_vs_ols.toml): the rows
+The scenario's truth is the paper's experiment regime (scenarios/studies/liu_vs_ols/liu_vs_ols.toml): the rows
 that do not depend on the estimator, coarse and OLS, must come out as the paper's Table 5
 (position max and mean within the factor the scenario states, all three layers), and the
 loop (diagnosis, the named effect modelled, refit, compensation) below the OLS row.
@@ -14,10 +14,9 @@ import pytest
 from calib.estimators.liu_cv import LiuCV, _folds
 from calib.estimators.ols import OLS
 from scenarios.config import load_scenario
-from scenarios.liu_vs_ols import POSITION_FACTOR, paper_match
-from scenarios.liu_vs_ols_draws import aggregate
-from scenarios.liu_vs_ols_pipeline import PAPER
 from scenarios.runner import run_scenario
+from scenarios.studies.liu_vs_ols.draws import aggregate
+from scenarios.studies.liu_vs_ols.pipeline import PAPER, POSITION_FACTOR, paper_match
 
 STATS = ("pos_max_mm", "pos_mean_mm", "ori_max_deg", "ori_mean_deg")
 

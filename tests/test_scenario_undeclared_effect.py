@@ -108,7 +108,7 @@ def test_the_recording_shows_data_in_every_view(run):
 def test_unknown_effect_in_a_scenario_is_named(tmp_path):
     from scenarios.config import ScenarioError
 
-    text = (ROOT / "scenarios/undeclared_effect.toml").read_text()
+    text = (ROOT / "scenarios/studies/undeclared_effect/undeclared_effect.toml").read_text()
     text = text.replace('kind = "lead_error_harmonic"', 'kind = "creep"').replace(
         'values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/'
     )

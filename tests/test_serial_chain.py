@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.exceptions import ModelError
 from twin.kinematics.batch import forward_batch
 from twin.kinematics.sensitivity import target_jacobian

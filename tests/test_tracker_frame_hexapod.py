@@ -15,9 +15,9 @@ import pytest
 from calib.cli.commands import main
 from calib.data import Dataset, write_dataset
 from calib.estimators.levenberg_marquardt import LMOptions, levenberg_marquardt
-from calib.fit.observations import Observations
 from calib.fit.identification import identify
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from calib.fit.registration import Registration, about, about_jacobian, identity
 from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.kinematics.batch import forward_batch

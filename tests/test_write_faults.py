@@ -192,7 +192,7 @@ def test_staged_files_go_in_as_a_set_or_not_at_all(tmp_path):
 
 
 def test_sweep_on_a_full_disk_exits_2(tmp_path, monkeypatch, capsys):
-    from scenarios import sweep as sweep_module
+    import scenarios.sweep.runner as sweep_module
     from scenarios.__main__ import main as scenarios_main
 
     def full(*args, **kwargs):

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.exceptions import IdentifiabilityError
 from calib.analysis.identifiability import RANK_RTOL, ZERO_RTOL, column_scale, scaled_jacobian
+from calib.exceptions import IdentifiabilityError
 from twin.kinematics.structure import one_blas_thread
 
 INDICES = ("product", "condition", "min_singular", "noise_amplification", "d_optimality")

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.exceptions import IdentifiabilityError
 from calib.analysis.observability_indices import MAXIMISE, better, index_with_each, observability
+from calib.exceptions import IdentifiabilityError
 
 TIE_RTOL = 1e-8  # index values this close (relative) are equal: the lower index wins
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.exceptions import IdentifiabilityError
 from calib.analysis.identifiability import RANK_RTOL, scaled_jacobian
+from calib.exceptions import IdentifiabilityError
 from twin.kinematics.structure import on_one_blas_thread
 
 

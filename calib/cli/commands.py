@@ -53,23 +53,20 @@ from calib.cli.common import (
     sigma_float,
 )
 from calib.cli.diagnose import cmd_diagnose
-from calib.data import DatasetError, read_dataset, sidecar_path
-from calib.loop.effect_kinds import model_for_result
+from calib.data import DatasetError, load_result, read_dataset, result_text, sidecar_path
 from calib.exceptions import CalibError
-from calib.fit.observations import model_from_files
-from calib.data.result_file import load_result, result_text
-from calib.fit.verdict import (
+from calib.fit import (
     DEFAULT_MAX_RATIO,
     EXIT_BAD_INPUT,
     EXIT_OK,
-)
-from calib.fit.workflow import (
     CalibrationRun,
+    model_from_files,
     regularisation_text,
     rejected_rows,
     result_content,
     verify_result,
 )
+from calib.loop import model_for_result
 from common.atomic_files import json_text
 from common.write_set import write_files
 from twin.exceptions import TwinError

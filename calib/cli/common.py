@@ -7,11 +7,18 @@ import math
 import sys
 
 from calib.data import read_dataset
-from calib.loop.effect_kinds import extended_model, load_effect
-from calib.fit.observations import model_from_files
-from calib.fit.prior import PriorSpec
-from calib.fit.verdict import EXIT_BAD_INPUT, EXIT_POOR_FIT, MAX_SIGMA_MM, Verdict
-from calib.fit.workflow import CalibrationRun, FitFailed, calibrate
+from calib.fit import (
+    EXIT_BAD_INPUT,
+    EXIT_POOR_FIT,
+    MAX_SIGMA_MM,
+    CalibrationRun,
+    FitFailed,
+    PriorSpec,
+    Verdict,
+    calibrate,
+    model_from_files,
+)
+from calib.loop import extended_model, load_effect
 
 
 def positive_float(text: str) -> float:

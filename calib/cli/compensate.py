@@ -30,15 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.compensate.poses import Compensation, compensate
-from calib.data.desired_poses import DesiredPoses, DesiredPosesError, read_desired_poses
-from calib.loop.effect_kinds import EffectFileError, load_effect
-from calib.compensate.identified_machine import IdentifiedMachine, load_identified_machine
-from calib.fit.observations import model_from_files
-from calib.fit.verdict import EXIT_OK, EXIT_UNREACHABLE
+from calib.compensate import Compensation, IdentifiedMachine, compensate, load_identified_machine
+from calib.data import DesiredPoses, DesiredPosesError, read_desired_poses
+from calib.fit import EXIT_OK, EXIT_UNREACHABLE, model_from_files
+from calib.loop import EffectFileError, load_effect
 from common.atomic_files import json_text
 from common.write_set import write_files
-from twin.kinematics.single_pose import forward
+from twin.kinematics import forward
 from twin.rotations import matrix_from_rpy, rpy_from_matrix
 
 FRAMES = ("base", "tracker")

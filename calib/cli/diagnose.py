@@ -10,11 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from calib.cli.common import print_verdict, run_fit
-from calib.data import DatasetError, read_dataset
-from calib.data.select import select_set, subset
-from calib.loop.effect_kinds import effect_content
-from calib.fit.verdict import EXIT_OK
-from calib.fit.workflow import CalibrationRun, rejected_rows
+from calib.data import DatasetError, read_dataset, select_set, subset
+from calib.fit import EXIT_OK, CalibrationRun, rejected_rows
+from calib.loop import effect_content
 from common.atomic_files import json_text
 from common.write_set import write_files
 
@@ -60,8 +58,8 @@ def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[objec
 def _diagnosis_test_set(args: argparse.Namespace, run: CalibrationRun):
     """The held-out rows as a TestSet in the base frame (through the calibration's
     registration for tracker-frame data), and the sentence saying which; (None, "")."""
-    from calib.diagnosis.core import TestSet
-    from calib.fit.observations import bind_dataset
+    from calib.diagnosis import TestSet
+    from calib.fit import bind_dataset
 
     held = _held_out_rows(args, run)
     if held is None:
@@ -93,7 +91,7 @@ def _typed_sigma_mm(args: argparse.Namespace, run: CalibrationRun) -> float | No
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from calib.diagnosis.core import diagnose
+    from calib.diagnosis import diagnose
 
     run = run_fit(args)
     if isinstance(run, int):
@@ -191,7 +189,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             }
         files: dict = {}
         if diag.plot is not None:
-            from calib.diagnosis.figure import save_diagnosis_png
+            from calib.diagnosis import save_diagnosis_png
 
             content["figure"] = str(out.with_suffix(".png"))
             files[out.with_suffix(".png")] = lambda tmp: save_diagnosis_png(diag, tmp)

@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import argparse
 
-from calib.compensate.identified_machine import load_identified_machine
-from calib.fit.observations import model_from_files
-from calib.compensate.model_export import FK_TOLERANCE_M, export_model, gains_text
-from calib.fit.verdict import EXIT_OK
+from calib.compensate import FK_TOLERANCE_M, export_model, gains_text, load_identified_machine
+from calib.fit import EXIT_OK, model_from_files
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

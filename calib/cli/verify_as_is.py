@@ -19,15 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.data import Dataset, read_dataset
-from calib.data.select import CALIBRATION, select_set
-from calib.fit.observations import bind_dataset
-from calib.fit.registration import Registration, initial_registration
-from calib.fit.verdict import EXIT_OK
-from calib.fit.verify import Side, score_side
+from calib.data import CALIBRATION, Dataset, read_dataset, select_set
+from calib.fit import EXIT_OK, Registration, Side, bind_dataset, initial_registration, score_side
 from common.atomic_files import json_text
 from common.write_set import write_files
-from twin.kinematics.batch import forward_batch
+from twin.kinematics import forward_batch
 from twin.mechanism import Mechanism
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.fit.verify import Verification
+from calib.fit import Verification
 from common.atomic_files import write_with_atomic
 
 

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.loop.effect_kinds import model_for_result
+from calib.data.result_file import CalibrationResult, load_result
 from calib.fit.model import CalibrationModel
 from calib.fit.registration import Registration
-from calib.data.result_file import CalibrationResult, load_result
+from calib.loop.effect_kinds import model_for_result
 from twin.mechanism import Mechanism
 
 

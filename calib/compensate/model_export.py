@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.exceptions import CalibError
 from calib.compensate.identified_machine import IdentifiedMachine
+from calib.exceptions import CalibError
 from common.write_set import write_files
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.formats.dh_extract import dh_table_of, format_dh_table

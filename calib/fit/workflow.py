@@ -12,15 +12,22 @@ from typing import Any
 
 import numpy as np
 
-from calib.data.hints import likely_causes
+from calib.analysis.rank_structure import describe, pose_probes, rank_correlations
 from calib.data.dataset import Dataset
 from calib.data.dataset_io import read_dataset
+from calib.data.hints import likely_causes
+from calib.data.result_file import (
+    CalibrationResult,
+    ResultFileError,
+    correlation_pairs,
+    unusable_values,
+)
 from calib.data.select import CALIBRATION, select_set
 from calib.estimators.levenberg_marquardt import LMOptions
 from calib.exceptions import CalibError, TooManyOutliersError
 from calib.fit.identification import IdentificationResult, identify
-from calib.fit.observations import Observations, bind_dataset
 from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations, bind_dataset
 from calib.fit.position_error import stats_mm
 from calib.fit.prior import (
     Prior,
@@ -29,14 +36,7 @@ from calib.fit.prior import (
     physical_ranges,
     weakly_identified,
 )
-from calib.analysis.rank_structure import describe, pose_probes, rank_correlations
 from calib.fit.regularisation import PriorChoice, choose_prior, cut_label
-from calib.data.result_file import (
-    CalibrationResult,
-    ResultFileError,
-    correlation_pairs,
-    unusable_values,
-)
 from calib.fit.verdict import (
     DEFAULT_MAX_RATIO,
     Accuracy,

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.exceptions import ConvergenceError
-from calib.loop.effect import ActuatorCorrection
 from calib.fit.model import CalibrationModel
+from calib.loop.effect import ActuatorCorrection
 from twin.kinematics.inverse_batch import commands_near
 from twin.workspace import commands_for_poses
 

@@ -22,8 +22,8 @@ from calib.estimators.levenberg_marquardt import (
     ResidualFn,
     levenberg_marquardt,
 )
-from calib.loop.effect import ActuatorCorrection
 from calib.fit.model import CalibrationModel, ColumnJacobian
+from calib.loop.effect import ActuatorCorrection
 from twin.exceptions import ClosureError
 
 # Gauss-Newton polish after Levenberg-Marquardt: stop once a step moves every parameter by at

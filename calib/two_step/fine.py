@@ -11,13 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.two_step.coarse import Measure
+from calib.analysis.reconstruction import correlation_reconstruction
 from calib.estimators.linear import LinearEstimate
 from calib.estimators.registry import make_estimator
 from calib.exceptions import IdentifiabilityError
 from calib.fit.model import CalibrationModel
+from calib.two_step.coarse import Measure
 from calib.two_step.nominal import nominal_targets
-from calib.analysis.reconstruction import correlation_reconstruction
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,11 @@
+"""Rerun recordings of a scenario: the Recorder (session, machine views, charts), the layout
+built from what was logged (blueprints), and the loop-closing views (loop)."""
+
+from common.face import face
+
+__all__, __getattr__, __dir__ = face(
+    __name__,
+    {
+        "recorder": ("Recorder",),
+    },
+)
