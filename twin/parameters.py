@@ -10,17 +10,24 @@ A parameter is one scalar deviation from the nominal MJCF, of one of five kinds:
 * ``actuator_gain``: a scale error of an actuator (element: the actuator's name), a
   dimensionless ``g``: the joint takes ``q0 + (c - q0)(1 + g)`` for the command ``c``, ``q0``
   the joint's zero (its ``qpos0``). Files show it in ppm.
+* ``joint_compliance``: an actuator that yields to its static gravity load (element: the
+  actuator's name): the joint takes ``q = c - k tau(q)``, ``tau`` the force or torque the
+  actuator holds at the pose. With ``payload_kg`` m, ``tau`` is the load of the model's own
+  masses plus m kilograms at the tool site and ``k`` a compliance (rad/(N m), m/N; files
+  deg/(kN m), mm/kN); without it, the load of one kilogram at the tool site alone and ``k``
+  the compliance times the payload's mass (per kg: the units times kg), what a model without
+  declared masses can know. The calibration model computes the loads (calib.fit.joint_compliance).
 
-The first four are geometry; a gain acts on the commands, not on the model: injection leaves
-it out, its screw is zero and it moves no site at a given configuration (its identification
-columns come from the calibration model, which maps commands to joint values through it).
-The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch refuse it.
+The first four are geometry; a gain or a compliance acts on the commands, not on the model:
+injection leaves it out, its screw is zero and it moves no site at a given configuration (its
+identification columns come from the calibration model, which maps commands to joint values
+through it). The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch refuse it.
 
-Values are SI (metres, radians, gains as plain numbers). Injection edits ``body_pos``,
-``body_quat``, ``site_pos``, ``qpos0`` of a copy of the nominal model and calls
-``mj_setConst`` (without it, sites compiled at a body origin ignore later edits). Each
-parameter also has a *screw* at the current configuration: a world translation ``t``, a world
-rotation ``w`` about point ``o``, so that a point ``p`` carried by it moves by
+Values are SI (metres, radians, gains as plain numbers, compliances in rad/(N m) or m/N).
+Injection edits ``body_pos``, ``body_quat``, ``site_pos``, ``qpos0`` of a copy of the nominal
+model and calls ``mj_setConst`` (without it, sites compiled at a body origin ignore later
+edits). Each parameter also has a *screw* at the current configuration: a world translation
+``t``, a world rotation ``w`` about point ``o``, so that a point ``p`` carried by it moves by
 ``t + w x (p - o)`` and its frame turns by ``w``.
 """
 
@@ -36,10 +43,19 @@ import mujoco
 import numpy as np
 
 from twin.exceptions import ParameterError
+from twin.parameter_kinds import (
+    ACTUATION_KINDS,
+    COMPLIANCE,
+    GAIN,
+    KINDS,
+    check_payload,
+    display_units,
+    from_display,
+    si_units,
+    to_display,
+)
 from twin.rotations import quat_from_rotvec, quat_multiply, skew
 
-KINDS = ("body_pos", "body_rot", "site_pos", "joint_zero", "actuator_gain")
-GAIN = KINDS.index("actuator_gain")
 SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 
@@ -52,6 +68,7 @@ class Parameter:
     kind: str
     element: str
     axis: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    payload_kg: float | None = None  # a joint_compliance's tool payload (None: per kg)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -83,7 +100,8 @@ class Parameter:
             for x in axis
         ):
             raise ParameterError(f"parameter '{self.name}': axis {self.axis!r} must be 3 numbers")
-        if self.kind not in ("joint_zero", "actuator_gain"):
+        check_payload(self.name, self.kind, self.payload_kg)
+        if self.kind not in ("joint_zero", *ACTUATION_KINDS):
             n = float(np.linalg.norm(self.axis))
             if not np.isclose(n, 1.0, atol=1e-9):
                 raise ParameterError(
@@ -109,11 +127,20 @@ class ParameterSet:
         self.body = np.zeros(n, dtype=int)
         self.is_angle = np.zeros(n, dtype=bool)
         self.is_gain = self.kind == GAIN
+        self.is_compliance = self.kind == COMPLIANCE
+        self.is_geometric = ~(self.is_gain | self.is_compliance)
+        # a compliance's payload (kg; NaN: per kg of payload) and whether its joint turns
+        self.payload_kg = np.array(
+            [np.nan if p.payload_kg is None else float(p.payload_kg) for p in self.parameters]
+        )
+        self.turns = np.zeros(n, dtype=bool)
         for k, p in enumerate(self.parameters):
             i = _element_id(model, p)
             self.element[k] = i
-            if p.kind == "actuator_gain":
-                self.body[k] = model.jnt_bodyid[_actuated_joint(model, p, i)]
+            if p.kind in ACTUATION_KINDS:
+                j = _actuated_joint(model, p, i)
+                self.body[k] = model.jnt_bodyid[j]
+                self.turns[k] = int(model.jnt_type[j]) == HINGE
             elif p.kind == "site_pos":
                 self.body[k] = model.site_bodyid[i]
             elif p.kind == "joint_zero":
@@ -139,7 +166,7 @@ class ParameterSet:
                     break
                 a = parent[a]
             for k in range(n):
-                self.subtree[k, b] = self.body[k] in chain and not self.is_gain[k]
+                self.subtree[k, b] = self.body[k] in chain and bool(self.is_geometric[k])
         self._rot_bodies = sorted({int(self.body[k]) for k in range(n) if self.kind[k] == 1})
         self._index_kinds()
         self._local = threading.local()
@@ -159,6 +186,11 @@ class ParameterSet:
         self.__dict__.update(state)
         if "is_gain" not in state:  # pickled before the gain kind
             self.is_gain = self.kind == GAIN
+        if "is_compliance" not in state:  # pickled before the compliance kind
+            self.is_compliance = np.zeros(len(self.kind), dtype=bool)
+            self.is_geometric = ~self.is_gain
+            self.payload_kg = np.full(len(self.kind), np.nan)
+            self.turns = np.zeros(len(self.kind), dtype=bool)
         if len(state.get("_of_kind", ())) != len(KINDS):  # pickled before the kinds were indexed
             self._index_kinds()
         self._local = threading.local()
@@ -177,31 +209,32 @@ class ParameterSet:
         """Whether any parameter is an actuator gain (not geometry)."""
         return bool(np.any(self.is_gain))
 
+    @property
+    def has_compliance(self) -> bool:
+        """Whether any parameter is a joint compliance (not geometry)."""
+        return bool(np.any(self.is_compliance))
+
+    @property
+    def is_geometry(self) -> bool:
+        """Whether every parameter is geometry (no gain, no compliance)."""
+        return bool(np.all(self.is_geometric))
+
     def units(self) -> list[str]:
-        """SI unit of each parameter: "m", "rad", or "1" for a (dimensionless) gain."""
-        return [
-            "1" if g else "rad" if a else "m"
-            for a, g in zip(self.is_angle, self.is_gain, strict=True)
-        ]
+        """SI unit of each parameter (twin.parameter_kinds.si_units)."""
+        return si_units(self)
 
     def display_units(self) -> list[str]:
-        """Unit of each parameter in files, results and printouts: "mm", "deg" or "ppm"."""
-        return [
-            "ppm" if g else "deg" if a else "mm"
-            for a, g in zip(self.is_angle, self.is_gain, strict=True)
-        ]
+        """Unit of each parameter in files, results and printouts (mm, deg, ppm, a
+        compliance's deg/(kN m) or mm/kN; twin.parameter_kinds)."""
+        return display_units(self)
 
     def to_display(self, values: np.ndarray) -> np.ndarray:
-        """SI -> millimetres, degrees and ppm, per parameter."""
-        v = np.asarray(values, dtype=float)
-        shown = np.where(self.is_angle, np.degrees(v), v * 1e3)
-        return np.where(self.is_gain, v * 1e6, shown) if self.has_gains else shown
+        """SI -> the display units, per parameter."""
+        return to_display(self, values)
 
     def from_display(self, values: Iterable[float]) -> np.ndarray:
-        """Millimetres, degrees and ppm -> SI, per parameter."""
-        v = np.asarray(list(values), dtype=float)
-        si = np.where(self.is_angle, np.radians(v), v * 1e-3)
-        return np.where(self.is_gain, v * 1e-6, si) if self.has_gains else si
+        """The display units -> SI, per parameter."""
+        return from_display(self, values)
 
     # ----------------------------------------------------------------- injection
     def rotation_vectors(self, values: np.ndarray) -> dict[int, np.ndarray]:
@@ -272,7 +305,7 @@ class ParameterSet:
                 o[k] = data.xpos[par] + xmat[par] @ model.body_pos[i]
             elif kind == 2:
                 t[k] = xmat[model.site_bodyid[i]] @ self.axis[k]
-            elif kind == GAIN:  # no motion at a given configuration
+            elif kind in (GAIN, COMPLIANCE):  # no motion at a given configuration
                 continue
             elif self.is_angle[k]:
                 w[k] = data.xaxis[i]
@@ -358,6 +391,7 @@ def _element_id(model: mujoco.MjModel, p: Parameter) -> int:
         "site_pos": (mujoco.mjtObj.mjOBJ_SITE, model.nsite),
         "joint_zero": (mujoco.mjtObj.mjOBJ_JOINT, model.njnt),
         "actuator_gain": (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu),
+        "joint_compliance": (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu),
     }[p.kind]
     i = mujoco.mj_name2id(model, obj, p.element)
     if i < 0:
@@ -371,27 +405,29 @@ def _element_id(model: mujoco.MjModel, p: Parameter) -> int:
 
 
 def _actuated_joint(model: mujoco.MjModel, p: Parameter, actuator: int) -> int:
-    """The slide or hinge joint that actuator ``actuator`` drives (a gain scales its travel)."""
+    """The slide or hinge joint that actuator ``actuator`` drives (a gain scales its travel,
+    a compliance yields it)."""
     j = int(model.actuator_trnid[actuator, 0])
     if int(model.actuator_trntype[actuator]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(
         model.jnt_type[j]
     ) not in (HINGE, SLIDE):
         raise ParameterError(
             f"parameter '{p.name}': actuator '{p.element}' does not drive a slide or hinge "
-            "joint, so it has no gain"
+            f"joint, so it has no {p.kind}"
         )
     return j
 
 
 def require_geometry(params: ParameterSet, what: str) -> None:
-    """Raise ParameterError if ``params`` holds actuator gains: ``what`` (a Jacobian of the
-    geometry at given joint values) has no column for them; the calibration model adds them
-    (it maps commands to joint values through the gains)."""
-    if params.has_gains:
-        names = [params.names[k] for k in np.flatnonzero(params.is_gain)]
+    """Raise ParameterError if ``params`` holds actuator gains or joint compliances: ``what``
+    (a Jacobian of the geometry at given joint values) has no column for them; the
+    calibration model adds them (it maps commands to joint values through them)."""
+    if not params.is_geometry:
+        names = [params.names[k] for k in np.flatnonzero(~params.is_geometric)]
         raise ParameterError(
-            f"{what} takes geometric parameters only; {names[:3]} are actuator gains, which "
-            "act through the commands (calib.fit.model.CalibrationModel adds their columns)"
+            f"{what} takes geometric parameters only; {names[:3]} are actuator gains or joint "
+            "compliances, which act through the commands (calib.fit.model.CalibrationModel adds "
+            "their columns)"
         )
 
 

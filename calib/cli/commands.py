@@ -66,7 +66,7 @@ from calib.fit import (
     result_content,
     verify_result,
 )
-from calib.loop import model_for_result
+from calib.loop import model_for_result, parameter_entry
 from common.atomic_files import json_text
 from common.write_set import write_files
 from twin.exceptions import TwinError
@@ -131,9 +131,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
             base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
             content["with"] = str(args.with_effect)
             content["added_parameters"] = [
-                {"name": p.name, "kind": p.kind, "element": p.element, "axis": list(p.axis)}
-                for p in run.model.params.parameters
-                if p.name not in base
+                parameter_entry(p) for p in run.model.params.parameters if p.name not in base
             ]
         write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code

@@ -24,7 +24,7 @@ def compensated_commands(
     model: CalibrationModel, values: np.ndarray, poses: np.ndarray
 ) -> np.ndarray:
     """Commands (N, A) for desired poses (N, 6) on the model with ``values`` injected
-    (through its actuator gains, if it has any)."""
+    (through its joint compliances and actuator gains, if it has any)."""
     return model.commands_for_joints(values, commands_for_poses(model.mechanism(values), poses))
 
 
@@ -36,9 +36,9 @@ def reachable_compensated_commands(
     workspace boundary the real machine may not reach what its nominal model could. The
     same solve, pose by pose from home, as ``python -m calib compensate``
     (calib.compensate.poses.solve_each), the joint values turned into commands through the
-    model's actuator gains (if any)."""
+    model's joint compliances and actuator gains (if any)."""
     solved = solve_each(model.mechanism(values), poses)
-    return model.commands_for_joints(values, solved.commands), solved.reachable
+    return model.commands_for_joints(values, solved.commands, solved.qpos), solved.reachable
 
 
 def corrected_poses(poses: np.ndarray, twists: np.ndarray) -> np.ndarray:
@@ -91,8 +91,8 @@ class TwistCompensation:
         corrected = corrected_poses(self.poses, twists)
         # every pose at once, each from its first inverse kinematics (the same exact inverse
         # kinematics as twin.kinematics.single_pose.inverse, to round-off; the same errors)
-        joints = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)[0]
-        return self.model.commands_for_joints(self.base_values, joints)
+        joints, qpos = inverse_near(mech, corrected, self.qpos, self.actuator_jacobians)
+        return self.model.commands_for_joints(self.base_values, joints, qpos)
 
 
 def twist_compensated_commands(

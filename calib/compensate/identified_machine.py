@@ -5,9 +5,9 @@ all start here: the nominal model and error model the user names, the result fil
 against them (same machine, same parameters), the identified values injected, and the
 tracker registration when the readings were in the tracker's frame. The parameters
 ``identify --with`` added (an effect a diagnosis named: actuator gains, reflector offsets,
-joint-axis tilts; calib.loop.effect_kinds) join the error model here, so that every consumer
-sees the same machine: the geometry as a mechanism, the gains as the map from commands to
-joint values (calib.fit.model.CalibrationModel).
+joint-axis tilts, joint compliances; calib.loop.effect_kinds) join the error model here, so that
+every consumer sees the same machine: the geometry as a mechanism, the gains and compliances
+as the map from commands to joint values (calib.fit.model.CalibrationModel).
 """
 
 from __future__ import annotations
@@ -39,10 +39,11 @@ class IdentifiedMachine:
         values are joint values: :meth:`commands_for_joints` maps them to commands)."""
         return self.model.mechanism(self.values)
 
-    def commands_for_joints(self, joints: np.ndarray) -> np.ndarray:
+    def commands_for_joints(self, joints: np.ndarray, qpos: np.ndarray | None = None) -> np.ndarray:
         """The commands (N, A) that give the actuated joints' values (N, A) (through the
-        identified actuator gains; the joint values themselves without gains)."""
-        return self.model.commands_for_joints(self.values, joints)
+        identified joint compliances, under the loads at their configurations ``qpos``
+        (N, nq) if known, and actuator gains; the joint values themselves without them)."""
+        return self.model.commands_for_joints(self.values, joints, qpos)
 
     def joints_for_commands(self, commands: np.ndarray) -> np.ndarray:
         """The actuated joints' values (N, A) the commands (N, A) give."""

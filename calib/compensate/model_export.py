@@ -102,29 +102,48 @@ def kinematics_difference(a: Mechanism, b: Mechanism, commands: np.ndarray) -> K
 
 
 def geometry(machine: IdentifiedMachine) -> tuple[ParameterSet, np.ndarray]:
-    """The identified machine's geometric parameters and their values (the gains left out)."""
+    """The identified machine's geometric parameters and their values (the gains and
+    compliances left out)."""
     params, values = machine.model.params, machine.values
-    if not params.has_gains:
+    if params.is_geometry:
         return params, values
-    keep = ~params.is_gain
+    keep = params.is_geometric
     chosen = [p for p, k in zip(params.parameters, keep, strict=True) if k]
     return ParameterSet(chosen, machine.nominal.model), values[keep]
 
 
 def gains_text(machine: IdentifiedMachine) -> str | None:
-    """The identified actuator gains in words (ppm), or None without any."""
+    """The identified actuator gains (ppm) and joint compliances in words, or None without
+    any."""
     params = machine.model.params
-    if not params.has_gains:
+    if params.is_geometry:
         return None
-    shown = params.to_display(machine.values)
-    parts = [
-        f"{params.parameters[k].element} {shown[k]:+.4g} ppm"
-        for k in np.flatnonzero(params.is_gain)
-    ]
-    return (
-        "actuator gains, no geometry and so not in the MJCF (the controller applies them: "
-        "joint = zero + (command - zero)(1 + gain)): " + ", ".join(parts)
-    )
+    shown, units = params.to_display(machine.values), params.display_units()
+    texts = []
+    if params.has_gains:
+        parts = [
+            f"{params.parameters[k].element} {shown[k]:+.4g} ppm"
+            for k in np.flatnonzero(params.is_gain)
+        ]
+        texts.append(
+            "actuator gains, no geometry and so not in the MJCF (the controller applies them: "
+            "joint = zero + (command - zero)(1 + gain)): " + ", ".join(parts)
+        )
+    if params.has_compliance:
+        parts = [
+            f"{params.parameters[k].element} {shown[k]:+.4g} {units[k]}"
+            + (
+                ""
+                if np.isnan(params.payload_kg[k])
+                else f" (own masses and {params.payload_kg[k]:g} kg at the tool)"
+            )
+            for k in np.flatnonzero(params.is_compliance)
+        ]
+        texts.append(
+            "joint compliances, no geometry and so not in the MJCF (the joints yield to their "
+            "gravity load: joint = command - compliance x load): " + ", ".join(parts)
+        )
+    return "; the ".join(texts)
 
 
 def calibrated_mjcf(
@@ -168,7 +187,7 @@ def _header(machine: IdentifiedMachine, model_path: Path, w: WrittenMjcf, c: Kin
             if machine.registration is not None
             else ""
         )
-        + (f" The {gains_text(machine)}." if machine.model.params.has_gains else "")
+        + (f" The {gains_text(machine)}." if not machine.model.params.is_geometry else "")
     )
 
 

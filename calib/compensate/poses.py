@@ -8,9 +8,10 @@ A pose that fails is named with the reason, in the units of files: which actuato
 how much it would leave its stroke, the axis that leaves the workspace, or an inverse
 kinematics that does not converge. ``compensate`` runs it on the identified machine for the
 poses a user asks for (started from the nominal solution of each, so that both stay on the
-same branch), turns the joint values into commands through the identified actuator gains
-(if any; their strokes checked again), and gives the residual the identified model predicts
-at the commands and the error it predicts for the nominal commands.
+same branch), turns the joint values into commands through the identified joint
+compliances and actuator gains (if any; their strokes checked again), and gives the residual
+the identified model predicts at the commands and the error it predicts for the nominal
+commands.
 """
 
 from __future__ import annotations
@@ -163,12 +164,14 @@ def compensate(
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     nominal = solve_each(machine.nominal, poses)
     solved = solve_each(machine.mechanism, poses, starts=nominal.qpos)  # joint values
-    commands = machine.commands_for_joints(solved.commands)
+    commands = machine.commands_for_joints(solved.commands, solved.qpos)
     problems = list(solved.problems)
     for i in np.flatnonzero(solved.reachable):  # a gain may take a command past its stroke
         excess = stroke_excess(machine.nominal, commands[i])
         if excess:
-            problems[i] = f"{excess} (the command, through the identified actuator gain)"
+            problems[i] = (
+                f"{excess} (the command, through the identified actuator gain or compliance)"
+            )
             commands[i] = np.nan
     reachable = np.array([p is None for p in problems], dtype=bool)
     goal_rot, goal_pos = pose_to_frame(poses)

@@ -26,6 +26,9 @@ DEFAULT_RANGE = {"length": 1.0, "angle": 0.1}  # mm, deg: assembly errors of a b
 # an actuator's scale (ppm): a screw's lead or a gear ratio is within a few hundred ppm, a
 # revolution-to-mm factor set by hand can be off by per cent; 1 % is the range's unit
 GAIN_RANGE_PPM = 1e4
+# a joint compliance (SI): a size-20 harmonic drive (1e4 N m/rad), a soft prismatic leg
+# (1e6 N/m); per kg of payload (a model without masses) under up to 10 kg
+COMPLIANCE_RANGE = {"turning": 1e-4, "sliding": 1e-6, "payload_kg": 10.0}
 
 
 @dataclass(frozen=True)
@@ -85,12 +88,19 @@ class Prior:
 def physical_ranges(params: Any, spec: PriorSpec | None = None) -> np.ndarray:
     """Each parameter's physical range in SI: the size an error of its kind can have on a
     built machine (``spec``'s, else ``DEFAULT_RANGE``; ``GAIN_RANGE_PPM`` for an actuator
-    gain): the unit in which the estimates' sizes are compared (calib.fit.redundancy) and the
-    weak directions judged (calib.fit.regularisation). ``params``: a ParameterSet."""
+    gain, ``COMPLIANCE_RANGE`` for a joint compliance): the unit in which the estimates'
+    sizes are compared (calib.fit.redundancy) and the weak directions judged
+    (calib.fit.regularisation). ``params``: a ParameterSet."""
     length = DEFAULT_RANGE["length"] if spec is None or spec.length_mm is None else spec.length_mm
     angle = DEFAULT_RANGE["angle"] if spec is None or spec.angle_deg is None else spec.angle_deg
     out = np.where(np.asarray(params.is_angle, dtype=bool), math.radians(angle), length * 1e-3)
-    return np.where(np.asarray(params.is_gain, dtype=bool), GAIN_RANGE_PPM * 1e-6, out)
+    out = np.where(np.asarray(params.is_gain, dtype=bool), GAIN_RANGE_PPM * 1e-6, out)
+    if not getattr(params, "has_compliance", False):
+        return out
+    r = COMPLIANCE_RANGE
+    comp = np.where(params.turns, r["turning"], r["sliding"])
+    comp = np.where(np.isnan(params.payload_kg), comp * r["payload_kg"], comp)
+    return np.where(params.is_compliance, comp, out)
 
 
 def padded_rows(weights: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

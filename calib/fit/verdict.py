@@ -40,6 +40,9 @@ DEFAULT_MAX_RATIO: float | None = None  # no gate on the residual's size unless 
 PLAUSIBLE_MM = 50.0
 PLAUSIBLE_DEG = 20.0
 PLAUSIBLE_PPM = 2e5  # an actuator gain 20 % off is a wrong factor, not a calibration error
+# a drive softer than 100 N m/rad (revolute) or 1e4 N/m (prismatic), under a payload of up to
+# 100 kg for the per-kg products, is a wrong model, not a joint compliance
+PLAUSIBLE_COMPLIANCE = {"deg/(kN m)": 600.0, "mm/kN": 100.0, "deg/(kN m) kg": 6e4, "mm/kN kg": 1e4}
 PLAUSIBLE_RESIDUAL_FRACTION = 0.01  # of the machine's reach, 3D RMS after calibration
 ASSUMED_SIGMA_MM = 0.05  # per coordinate: a laser tracker at a few metres plus repeatability
 # a tracker, motion capture or measuring arm is accurate to a few millimetres at worst; a
@@ -189,10 +192,11 @@ def implausible_estimates(
     units: Any,
     display_std: Any = None,
 ) -> tuple[str, ...]:
-    """Parameters whose estimate (in its display unit: "mm", "deg", "ppm"; a bool is read
-    as angle or not) exceeds the plausible size of its kind by more than three of its
-    standard errors (``display_std``, same units; None: by any amount)."""
+    """Parameters whose estimate (in its display unit: "mm", "deg", "ppm", a compliance's;
+    a bool is read as angle or not) exceeds the plausible size of its kind by more than three
+    of its standard errors (``display_std``, same units; None: by any amount)."""
     limits = {"mm": PLAUSIBLE_MM, "deg": PLAUSIBLE_DEG, "ppm": PLAUSIBLE_PPM}
+    limits.update(PLAUSIBLE_COMPLIANCE)
     out = []
     std = [0.0] * len(names) if display_std is None else list(display_std)
     for name, v, s, unit in zip(names, display_values, std, units, strict=True):

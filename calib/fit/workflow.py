@@ -117,7 +117,8 @@ def calibrate(
             scales=(None, 1.0),
         )
         choice = replace(choice, scale=1.0)
-        widths = np.where(np.asarray(model.params.is_gain, bool), np.inf, ranges)  # gains free
+        # gains and compliances free: the prior is on the geometry
+        widths = np.where(np.asarray(model.params.is_geometric, bool), ranges, np.inf)
         prior = Prior(widths, choice.noise_sigma_m)
         result = _identified(model, obs, unidentifiable, options, prior, False)
     try:
@@ -308,7 +309,7 @@ def prior_content(run: CalibrationRun) -> dict[str, Any] | None:
         return None
     ranges = physical_ranges(run.model.params, run.prior_spec)
     is_angle = np.asarray(run.model.params.is_angle, dtype=bool)
-    is_length = ~is_angle & ~np.asarray(run.model.params.is_gain, dtype=bool)
+    is_length = ~is_angle & np.asarray(run.model.params.is_geometric, dtype=bool)
     length = float(ranges[is_length][0]) * 1e3 * choice.scale if is_length.any() else None
     angle = float(np.degrees(ranges[is_angle][0])) * choice.scale if is_angle.any() else None
     return {

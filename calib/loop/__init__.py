@@ -12,6 +12,7 @@ __all__, __getattr__, __dir__ = face(
             "diagnosed_correction",
         ),
         "effect_kinds": (
+            "parameter_entry",
             "EffectFileError",
             "effect_content",
             "extended_model",

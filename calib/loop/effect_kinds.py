@@ -8,13 +8,22 @@ alone, so that verify, the compensation and an exported model can use it):
                         its commanded travel from its zero)
 * ``reflector_offsets`` ``site_pos`` offsets of the reflectors the error model lacks
 * ``joint_axis_errors`` ``body_rot`` tilts of the joint axes the error model lacks
+* ``gravity_compliance`` one ``joint_compliance`` per actuator whose load the fit saw (a joint
+                        no gravity load reaches, such as a vertical first axis or a last axis
+                        the payload sits on, has no column in the diagnosis and none here):
+                        on a model without declared masses the compliance times the payload's
+                        mass under a tool payload (``<a>.compliance_x_payload``, no
+                        ``payload_kg``), the diagnosis's own product; on a model with masses
+                        the compliance (``<a>.compliance``) under its own masses plus the
+                        payload the diagnosis's scan chose, written as the parameters'
+                        ``payload_kg`` so that the kind's load is the one the diagnosis fitted
 
 ``calib identify --with D.json`` adds them to the error model and refits geometry and effect
 together; the result file lists them (``added_parameters``), and :func:`model_for_result`
 rebuilds that model wherever the result is read. An effect that depends on time or on the
-direction of approach (thermal growth, drift, backlash) or on a shape the diagnosis scanned
-(a lead of some pitch, an eccentricity, a compliance under a payload) is no static kind yet:
-it is said so, and its before and after stay the diagnosis's own.
+direction of approach (thermal growth, drift, backlash) or on a periodic shape the diagnosis
+scanned (a lead of some pitch, an eccentricity) is no static kind yet: it is said so, and its
+before and after stay the diagnosis's own.
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ from calib.exceptions import CalibError
 from calib.fit.model import CalibrationModel
 from twin.parameters import Parameter, ParameterSet
 
-STATIC = ("gain_error", "reflector_offsets", "joint_axis_errors")
+STATIC = ("gain_error", "reflector_offsets", "joint_axis_errors", "gravity_compliance")
 # why the others are no static kind of the error model (yet)
 NOT_STATIC = {
     "thermal_growth": "it changes with time since the machine was switched on",
@@ -38,8 +47,6 @@ NOT_STATIC = {
     "backlash": "it depends on the direction from which each actuator approached the pose",
     "lead_error": "it is periodic in the command at the pitch the diagnosis scanned",
     "encoder_eccentricity": "it is periodic in the joint angle at the harmonic scanned",
-    "gravity_compliance": "it depends on the gravity load at each pose (a compliance under a "
-    "payload the data cannot separate from it)",
 }
 
 
@@ -52,9 +59,15 @@ class EffectFileError(CalibError):
     """A diagnosis file that cannot be used to extend the error model."""
 
 
-def parameters_for(model: CalibrationModel, effect: str) -> list[Parameter]:
+def parameters_for(
+    model: CalibrationModel, effect: str, fitted: dict[str, Any] | None = None
+) -> list[Parameter]:
     """The error-model parameters that carry the static ``effect`` on this model (those it
-    already holds left out)."""
+    already holds left out); ``fitted``: the diagnosis's fit of the effect (its
+    ``effect_parameters`` entry: parameter -> value, std, unit; the shape likewise), which
+    the compliance reads."""
+    if effect == "gravity_compliance":
+        return compliance_parameters(model, fitted)
     if effect == "gain_error":
         have = {(p.kind, p.element) for p in model.params.parameters if p.kind == "actuator_gain"}
         return [
@@ -67,16 +80,50 @@ def parameters_for(model: CalibrationModel, effect: str) -> list[Parameter]:
     raise EffectFileError(f"'{effect}' is no static kind of the error model (those: {STATIC})")
 
 
+def compliance_parameters(
+    model: CalibrationModel, fitted: dict[str, Any] | None = None
+) -> list[Parameter]:
+    """One ``joint_compliance`` per actuator for the diagnosis's ``gravity_compliance``,
+    named as the diagnosis names its parameters, under the load the diagnosis fitted: the
+    tool payload alone per kg on a model without declared masses, the model's masses plus
+    the payload its scan chose (``fitted``'s ``payload``, kg; none fitted: 0) otherwise. An
+    actuator whose parameter the fit did not see (value 0 without a standard error) is left
+    out, as is one the error model already gives a compliance."""
+    nominal = model.nominal
+    per_kg = nominal.masses_defaulted
+    suffix = "compliance_x_payload" if per_kg else "compliance"
+    fitted = fitted or {}
+    payload = None
+    if not per_kg:
+        shape = fitted.get("payload") or {}
+        payload = float(shape["value"]) if isinstance(shape.get("value"), (int, float)) else 0.0
+    have = {p.element for p in model.params.parameters if p.kind == "joint_compliance"}
+    out = []
+    for a in nominal.actuator_names:
+        entry = fitted.get(f"{a}.{suffix}")
+        unseen = entry is not None and entry.get("std") is None and entry.get("value") == 0.0
+        if a in have or unseen:
+            continue
+        out.append(Parameter(f"{a}.{suffix}", "joint_compliance", a, payload_kg=payload))
+    return out
+
+
 def static_parts(chosen: str) -> tuple[list[str], list[str]]:
     """The named effects ('a+b') split into static kinds and the others."""
     names = [] if chosen in ("none", "") or chosen.startswith("unexplained") else chosen.split("+")
     return [n for n in names if n in STATIC], [n for n in names if n not in STATIC]
 
 
-def effect_content(model: CalibrationModel, chosen: str) -> dict[str, Any]:
-    """The ``effect`` block of a diagnosis file: which parameters identify --with adds."""
+def effect_content(
+    model: CalibrationModel, chosen: str, fitted: dict[str, dict] | None = None
+) -> dict[str, Any]:
+    """The ``effect`` block of a diagnosis file: which parameters identify --with adds
+    (``fitted``: the diagnosis's ``effect_parameters``, by effect)."""
     static, other = static_parts(chosen)
-    adds = [_as_dict(p) for name in static for p in parameters_for(model, name)]
+    fits = fitted or {}
+    adds = [
+        parameter_entry(p) for name in static for p in parameters_for(model, name, fits.get(name))
+    ]
     return {
         "named": chosen,
         "model": model.nominal.name,
@@ -87,13 +134,17 @@ def effect_content(model: CalibrationModel, chosen: str) -> dict[str, Any]:
     }
 
 
-def _as_dict(p: Parameter) -> dict[str, Any]:
-    return {
+def parameter_entry(p: Parameter) -> dict[str, Any]:
+    """``p`` as an entry of ``added_parameters`` (a compliance's ``payload_kg`` with it)."""
+    out: dict[str, Any] = {
         "name": p.name,
         "kind": p.kind,
         "element": p.element,
         "axis": [float(a) for a in p.axis],
     }
+    if p.payload_kg is not None:
+        out["payload_kg"] = float(p.payload_kg)
+    return out
 
 
 def _parameter(entry: Any, where: str) -> Parameter:
@@ -102,7 +153,11 @@ def _parameter(entry: Any, where: str) -> Parameter:
     axis = entry.get("axis", [0.0, 0.0, 0.0])
     try:
         return Parameter(
-            str(entry["name"]), str(entry["kind"]), str(entry["element"]), tuple(map(float, axis))
+            str(entry["name"]),
+            str(entry["kind"]),
+            str(entry["element"]),
+            tuple(map(float, axis)),
+            entry.get("payload_kg"),
         )
     except (TypeError, ValueError) as exc:
         raise EffectFileError(f"{where}: {exc}") from None

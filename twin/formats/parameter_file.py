@@ -3,7 +3,8 @@
 An error-model file lists ``[[parameter]]`` tables (``name``, ``kind``, ``element``, ``axis``);
 a values file holds ``[values]`` by parameter name in millimetres and degrees (the units of
 files; an ``actuator_gain``, whose element is an actuator's name and which needs no axis, in
-ppm), converted to SI here and nowhere else.
+ppm; a ``joint_compliance``, likewise an actuator's, in deg/(kN m) or mm/kN, with an optional
+``payload_kg``: twin.parameter_kinds), converted to SI here and nowhere else.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ _BOMS = (  # longest first: the UTF-32 marks begin with the UTF-16 ones
     (b"\xfe\xff", "UTF-16 (big-endian)"),
     (b"\xff\xfe", "UTF-16 (little-endian)"),
 )
-ENTRY_FIELDS = ("name", "kind", "element", "axis")
+ENTRY_FIELDS = ("name", "kind", "element", "axis", "payload_kg")
 REQUIRED_FIELDS = ("name", "kind", "element")
 TOP_LEVEL_KEYS = ("model", "parameter")
 _UTF8 = "UTF-8 is expected (save or export the file as UTF-8)"
@@ -154,7 +155,7 @@ def _entry(path: Path, k: int, e: object) -> Parameter:
         )
     axis = _axis_field(where, e)
     try:
-        return Parameter(name, kind, element, axis)
+        return Parameter(name, kind, element, axis, e.get("payload_kg"))
     except ParameterError as exc:
         raise ParameterError(f"{path}: parameter #{k + 1}: {exc}") from None
 

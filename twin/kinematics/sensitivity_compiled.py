@@ -59,7 +59,7 @@ def screw_arrays(
         code[k], body[k], vec[k] = SHIFT, model.site_bodyid[el[k]], axis[k]
     for k in np.flatnonzero(kind == 3):
         code[k] = HINGE if params.is_angle[k] else SLIDE
-    for k in np.flatnonzero(params.is_gain):  # no motion (callers refuse gains before)
+    for k in np.flatnonzero(~params.is_geometric):  # no motion (callers refuse them before)
         code[k], body[k] = SHIFT, 0
     return code, int_array(el), body, vec, pivot
 

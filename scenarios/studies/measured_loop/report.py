@@ -37,6 +37,21 @@ def _diagnosis_sentence(s: dict[str, Any]) -> str:
     return f"The diagnosis names **{named}**: {d['reason']}.{held}{tail}"
 
 
+def _refit_sentence(w: dict[str, Any]) -> str:
+    params = w.get("parameters") or {}
+    shown = ", ".join(
+        f"{n} = {p['value']:.4g}"
+        + (f" +- {p['std']:.2g}" if p.get("std") is not None else "")
+        + f" {p['unit']}"
+        for n, p in params.items()
+    )
+    verdict = (w.get("verdict") or {}).get("message", "")
+    return (
+        f"**Identify --with.** The effect's parameters refitted with the geometry: {shown}. "
+        f"{verdict}"
+    )
+
+
 def report(s: dict[str, Any]) -> str:
     v = s["verdict"]
     codes = ", ".join(f"{k} {c}" for k, c in s["exit_codes"].items())
@@ -70,6 +85,10 @@ def report(s: dict[str, Any]) -> str:
         "",
         "**Diagnose.** " + _diagnosis_sentence(s),
         "",
+    ]
+    if "with_effect" in s:
+        lines += [_refit_sentence(s["with_effect"]), ""]
+    lines += [
         f"Run time {s['runtime_s']:.1f} s.",
         "",
     ]

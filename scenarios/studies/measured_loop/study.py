@@ -129,7 +129,15 @@ def run(
             common, with_result, out_dir / "verify_with_effect.json", out_dir / "verify_with.log"
         )
         summary["exit_codes"].update(identify_with=code_with, verify_with=code_vw)
-        summary["with_effect"] = {"test": {"before": ver_w["before"], "after": ver_w["after"]}}
+        refit = json.loads(with_result.read_text()) if with_result.is_file() else {}
+        added = [a["name"] for a in diag["effect"]["added_parameters"]]
+        summary["with_effect"] = {
+            "test": {"before": ver_w.get("before"), "after": ver_w.get("after")},
+            "verdict": refit.get("verdict"),
+            "parameters": {
+                n: refit["parameters"][n] for n in added if n in refit.get("parameters", {})
+            },
+        }
     summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report("measured_loop", summary)
     return summary
