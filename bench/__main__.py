@@ -3,7 +3,8 @@
 * forward kinematics of the hexapod, the polisher and the serial arm: single pose and batched
   (twin.kinematics.batch.forward_batch, 10,000 poses, best of 5, on the compiled kernels and
   on the numpy path alternately), poses per second (bench.fk);
-* identification on each machine (bench.machines): ours (calib.fit.identification, robust by default and
+* identification on each machine (bench.machines): ours (calib.fit.identification, robust by
+default and
   plain least squares) against scipy.optimize.least_squares with a finite-difference Jacobian
   on a fresh model over the same free parameters with tolerances as tight as ours, best of N,
   both answers compared (bench.identification);

@@ -22,7 +22,7 @@ from scenarios.studies.diagnosis_benchmark.study import (
 from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent
-COMMITTED = ROOT / "scenarios" / "diagnosis_benchmark.toml"
+COMMITTED = ROOT / "scenarios" / "studies" / "diagnosis_benchmark" / "diagnosis_benchmark.toml"
 
 
 def _reduced(tmp_path: Path, **benchmark) -> Path:

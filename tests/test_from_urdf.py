@@ -1,4 +1,5 @@
-"""URDF in (python -m twin.formats.from_urdf) and the complete error model (python -m twin.formats.error_model).
+"""URDF in (python -m twin.formats.from_urdf) and the complete error model (python -m
+twin.formats.error_model).
 
 The URDF of models/arm6r gives arm6r.xml's forward kinematics to 1e-9 m; fixed, continuous
 and prismatic joints, inertials and meshes are read; a generated error model spans every

@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from scenarios.config import find_scenario
 from scenarios.recording.charts import error_colors
 from scenarios.recording.recorder import Recorder
 from twin.kinematics.single_pose import forward
@@ -333,7 +334,7 @@ SMALLER = {  # the scenario, cut down to seconds: (section, key, full value, sma
 def _scenario_copy(name: str, tmp_path: Path) -> str:
     """The shipped scenario file, or a copy with fewer poses (relative paths still resolve
     from scenarios/ and the repository)."""
-    text = (ROOT / "scenarios" / f"{name}.toml").read_text()
+    text = find_scenario(name).read_text()
     if name not in SMALLER:
         return name
     for _section, key, full, small in SMALLER[name]:

@@ -1,6 +1,7 @@
 """CI accuracy gates of the main scenario (issue: liu_vs_ols) and its summary contract.
 
-The scenario's truth is the paper's experiment regime (scenarios/studies/liu_vs_ols/liu_vs_ols.toml): the rows
+The scenario's truth is the paper's experiment regime
+(scenarios/studies/liu_vs_ols/liu_vs_ols.toml): the rows
 that do not depend on the estimator, coarse and OLS, must come out as the paper's Table 5
 (position max and mean within the factor the scenario states, all three layers), and the
 loop (diagnosis, the named effect modelled, refit, compensation) below the OLS row.

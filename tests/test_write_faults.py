@@ -206,7 +206,8 @@ def test_sweep_on_a_full_disk_exits_2(tmp_path, monkeypatch, capsys):
 
 
 def test_dh_table_on_a_full_disk_writes_neither_file(tmp_path, monkeypatch, capsys):
-    """``python -m twin.formats.dh_table --out-dir``: the MJCF and its error model, both or neither."""
+    """``python -m twin.formats.dh_table --out-dir``: the MJCF and its error model, both or
+    neither."""
     from twin.formats.dh_table import main as dh_main
 
     real = write_set_module._temporary

@@ -21,7 +21,8 @@ A parameter is one scalar deviation from the nominal MJCF, of one of five kinds:
 The first four are geometry; a gain or a compliance acts on the commands, not on the model:
 injection leaves it out, its screw is zero and it moves no site at a given configuration (its
 identification columns come from the calibration model, which maps commands to joint values
-through it). The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch refuse it.
+through it). The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch
+refuse it.
 
 Values are SI (metres, radians, gains as plain numbers, compliances in rad/(N m) or m/N).
 Injection edits ``body_pos``, ``body_quat``, ``site_pos``, ``qpos0`` of a copy of the nominal

@@ -36,7 +36,8 @@ def actuator_jacobians(model: CalibrationModel, values: np.ndarray, qpos: np.nda
 
 
 def actuator_jacobians_batch(model: CalibrationModel, values: np.ndarray, qpos: np.ndarray):
-    """:func:`actuator_jacobians` by the batched adjoint (twin.kinematics.sensitivity_batch): the same
+    """:func:`actuator_jacobians` by the batched adjoint (twin.kinematics.sensitivity_batch): the
+    same
     derivatives to round-off (1e-12 relative, tested), all poses at once."""
     mech = model.mechanism(values)
     offsets = actuator_offsets(model)

@@ -6,7 +6,8 @@ injected joint zero moves it): for the command ``c`` the joint takes
 
     q = q0 + (c - q0)(1 + g),          so          c = q0 + (q - q0) / (1 + g),
 
-the gains of one actuator adding up. The geometry's Jacobian (twin.kinematics.sensitivity_batch) holds
+the gains of one actuator adding up. The geometry's Jacobian (twin.kinematics.sensitivity_batch)
+holds
 the joint values; the gains enter through them, so with ``J_a`` the column of actuator
 ``a``'s joint (a joint zero of it moves the targets as its joint value does:
 twin.kinematics.inverse_batch.actuator_joint_parameters):

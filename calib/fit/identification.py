@@ -158,7 +158,8 @@ def identify(
 
 
 def _analysed(jac: np.ndarray, names: tuple[str, ...]) -> IdentifiabilityReport:
-    """:func:`calib.analysis.identifiability.analyse` of a tall Jacobian through its QR factor ``R``:
+    """:func:`calib.analysis.identifiability.analyse` of a tall Jacobian through its QR factor
+    ``R``:
     ``J = Q R`` with orthonormal ``Q`` keeps every column norm, singular value, pivoted-QR
     choice and least-squares coefficient, in n rows instead of m (a 2304 x 54 hexapod
     Jacobian: 54 rows, a tenth of the identification's time saved). The report still counts

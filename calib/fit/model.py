@@ -2,7 +2,8 @@
 
 It predicts tracker-target positions for actuator commands under given parameter values
 (closed-chain forward kinematics of the injected model) and their identification Jacobian
-(implicit-function form over the closed chain, all poses at once: twin.kinematics.sensitivity_batch).
+(implicit-function form over the closed chain, all poses at once:
+twin.kinematics.sensitivity_batch).
 Actuator gains among the parameters map the commands to joint values first, joint
 compliances then let each joint yield to its gravity load (calib.fit.joint_compliance: the
 joints settle at a fixed point), and their columns are assembled beside the geometric ones
@@ -209,7 +210,8 @@ class CalibrationModel:
 
     def tool_twist_jacobian(self, values: np.ndarray, qpos: np.ndarray) -> np.ndarray:
         """d(tool pose error twist)/d(values) (N, 6, n) at the closed configurations ``qpos``
-        (N, nq) of the model at ``values`` (twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch
+        (N, nq) of the model at ``values``
+        (twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch
         with the gains' and the compliances' columns)."""
         mech = self.mechanism(values)
         if self.params.is_geometry:

@@ -1,4 +1,5 @@
-"""The DH table of a model generated from one (``twin.formats.dh_table``), read back from its bodies.
+"""The DH table of a model generated from one (``twin.formats.dh_table``), read back from its
+bodies.
 
 A model built by ``twin.formats.dh_mjcf`` keeps one DH row in two bodies per link (``link{i}_dh``
 and ``link{i}``), so the table can be read back from any compiled model of it, in particular
@@ -62,7 +63,7 @@ def _convention(model: mujoco.MjModel) -> str:
     base, dh1, link1 = (_body(model, n) for n in ("base", "link1_dh", "link1"))
     if base is None or dh1 is None or link1 is None:
         raise DHStructureError(
-            "the model was not generated from a DH table (python -m twin.formats.dh_table): it has no "
+            "the model was not generated from a DH table (python -m twin.formats.dh_table): it has no "  # noqa: E501
             "bodies 'base', 'link1_dh' and 'link1'"
         )
     if model.body_parentid[link1] == dh1 and model.body_parentid[dh1] == base:

@@ -12,7 +12,8 @@ The error contracts by about |J(c) - J(c_0)| / |J| per step (1e-4 for a tenth of
 millimetre on a machine of a metre): a few steps reach round-off, where the iteration stops
 (the residual no longer halves). A pose whose tool error is then not below the single-pose
 solver's tolerance (twin.kinematics.single_pose.TOLERANCE), or any pose of a machine without as many
-actuators as tool degrees of freedom (6), is solved by twin.kinematics.single_pose.inverse from its known
+actuators as tool degrees of freedom (6), is solved by twin.kinematics.single_pose.inverse from its
+known
 configuration, so the result is always that of an exact inverse kinematics on the same
 assembly branch, and the errors (unreachable pose, command outside its stroke) are those of
 twin.kinematics.single_pose.inverse.
@@ -73,7 +74,8 @@ def inverse_near(
     each solved from the nearby closed configuration ``start`` (N, nq); ``jacobians``
     (N, 6, A) of :func:`actuator_twist_jacobians` at ``start`` when already computed.
 
-    ``check_stroke``: raise WorkspaceError, as twin.kinematics.single_pose.inverse does, for the first
+    ``check_stroke``: raise WorkspaceError, as twin.kinematics.single_pose.inverse does, for the
+    first
     pose whose commands leave a stroke."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     start = np.atleast_2d(np.asarray(start, dtype=float))

@@ -14,7 +14,8 @@ Everything is read from the model (which dof moves which site, joint kinds), so 
 goes through this one code path; a structure the elimination does not fit (a closure with more
 private columns than rows, a dof in no closure) treats every dof as shared, which is the full
 system. Arrays are "structure of arrays" with the configurations last (twin.kinematics.tree).
-Elimination is numpy vectorised over configurations (twin.kinematics.small_systems): no per-configuration
+Elimination is numpy vectorised over configurations (twin.kinematics.small_systems): no
+per-configuration
 LAPACK call. Pivots are static (chosen once by partial pivoting at the home configuration, for
 each closure and for the square reduced system) and checked in every solve; a system whose
 pivot fails the threshold test is redone by Householder reflections.

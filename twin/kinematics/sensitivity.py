@@ -68,7 +68,8 @@ def tool_twist_jacobian(
 ) -> np.ndarray:
     """d(tool pose error twist)/d(parameters), (6, n): linear velocity of the tool point and
     angular velocity, world axes (the first paper's B of Eq. 7, from the twin). For many
-    poses, twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch (the tests' reference is this)."""
+    poses, twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch (the tests' reference is
+    this)."""
     sites = np.array([mech.tool_site])
     dq, free, dp, dw = _implicit(mech, params, values, qpos, sites)
     jp, jr = site_jacobians(mech, sites)

@@ -224,7 +224,8 @@ def tool_twist_jacobian_batch(
 ) -> np.ndarray:
     """d(tool pose error twist)/d(parameters) at closed configurations ``qpos`` (N, nq):
     (N, 6, n), the linear velocity of the tool point then the angular velocity, world axes
-    (:func:`twin.kinematics.sensitivity.tool_twist_jacobian` of every pose). ``mech`` carries the model
+    (:func:`twin.kinematics.sensitivity.tool_twist_jacobian` of every pose). ``mech`` carries the
+    model
     with ``values`` injected; ``plan`` (from the nominal machine) may be reused."""
     plan = plan or JacobianPlan.for_mechanism(mech)
     out = Outputs(np.array([mech.tool_site], dtype=int), plan.tool_moves, angular=True)

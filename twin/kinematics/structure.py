@@ -55,7 +55,8 @@ def one_blas_thread() -> contextlib.AbstractContextManager:
     The kinematics' and the identification's matrices are small (6 x 6 to 2304 x 60): a
     second BLAS thread only waits for the first, and under load it made a 2304 x 54 ``J^T J``
     take 64 ms instead of 0.19 ms. Batched kinematics, the identification Jacobian and
-    ``calib.fit.identification`` run inside this (results never depend on it: one thread or many give
+    ``calib.fit.identification`` run inside this (results never depend on it: one thread or many
+    give
     the same numbers to round-off, and every check has a tolerance)."""
     controller = _blas_controller()
     return contextlib.nullcontext() if controller is None else controller.limit(limits=1)

@@ -1,4 +1,5 @@
-"""``python -m twin.kinematics.warm_up`` (``make setup``): the compiled kernels into numba's cache."""
+"""``python -m twin.kinematics.warm_up`` (``make setup``): the compiled kernels into numba's
+cache."""
 
 from __future__ import annotations
 

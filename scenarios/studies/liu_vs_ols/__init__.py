@@ -1,4 +1,5 @@
-"""The liu_vs_ols study: Coarse then fine calibration of the hybrid polisher, Liu against OLS (first paper, 4-5).
+"""The liu_vs_ols study: Coarse then fine calibration of the hybrid polisher, Liu against OLS
+(first paper, 4-5).
 Its scenario files (TOML) beside its run (study.py), report and figures."""
 
 __all__ = [

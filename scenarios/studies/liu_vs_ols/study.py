@@ -13,7 +13,8 @@ side sees only the nominal model, the error model and tracker readings of the ga
    every stage on the same machine state (scenarios.studies.liu_vs_ols.pipeline.score), with an
    "OLS again" control scored last;
 5. Monte Carlo of the fine estimate (Eqs. 17-18) over noise draws sharing one H, eta at the
-   d the run used, and the test-layer error the noise alone leaves (scenarios.studies.liu_vs_ols.noise).
+   d the run used, and the test-layer error the noise alone leaves
+   (scenarios.studies.liu_vs_ols.noise).
 
 A scenario with a ``[draws]`` table is the draw study instead (scenarios.studies.liu_vs_ols.draws).
 """
