@@ -54,10 +54,11 @@ def _inertial(m: re.Match) -> str:
 
 
 def _massive_arm() -> Mechanism:
-    """The 6R arm with declared masses, one per moving link."""
+    """The 6R arm with declared masses, one per moving link (the same machine as
+    arm6r_3targets, whose error model it takes, weighed)."""
     xml = (MODELS / "arm6r_3targets.xml").read_text()
     xml = re.sub(r'(<joint name="A(\d)"[^>]*/>)', _inertial, xml)
-    return Mechanism.from_xml_string(xml.replace('"arm6r_3targets"', '"arm6r_massive"'))
+    return Mechanism.from_xml_string(xml)
 
 
 def _machine(name: str, payload_kg: float | None = None, gains: bool = True):
