@@ -13,7 +13,7 @@ ENGINE ?= ray
 SET    ?=
 SETFLAGS := $(foreach s,$(SET),--set $(s))
 
-.PHONY: setup test test-fast scenario sweep bench lint format view clean
+.PHONY: setup test test-fast scenario sweep bench lint format view screenshots clean
 
 setup: $(STAMP)
 
@@ -60,6 +60,14 @@ lint: $(STAMP)
 format: $(STAMP)
 	$(PY) -m ruff format .
 	$(PY) -m ruff check --fix .
+
+# docs/img: the first-open face and a scrubbed face of every recording under results/, as the
+# web viewer shows them (needs Chromium: apt-get install chromium; not part of `make test`).
+# RRD=results/x/x.rrd for one; WAIT=seconds for the viewer to draw (software rendering).
+RRD  ?=
+WAIT ?= 60
+screenshots: $(STAMP)
+	$(PY) docs/screenshots.py $(RRD) --out docs/img --wait $(WAIT)
 
 MODEL ?= models/hexapod_rrrprr.xml
 view: $(STAMP)

@@ -68,6 +68,19 @@ def save_png(fig: plt.Figure, path: Path, close: bool = True) -> Path:
             plt.close(fig)
 
 
+def png_bytes(fig: plt.Figure, close: bool = True) -> bytes:
+    """``fig`` as PNG bytes (at DPI, as save_png), for a recording; then closed."""
+    import io
+
+    buffer = io.BytesIO()
+    try:
+        fig.savefig(buffer, dpi=DPI, format="png", pil_kwargs=PNG_OPTIONS)
+    finally:
+        if close:
+            plt.close(fig)
+    return buffer.getvalue()
+
+
 def save_pngs(fig: plt.Figure, frames: Iterable[Frame], close: bool = True) -> list[Path]:
     """One PNG per frame of ``fig``, what the frames share drawn once (at DPI, as save_png).
 
@@ -332,12 +345,26 @@ def index_vs_count_png(
     series: Mapping[str, Sequence[float]],
     ylabel: str,
     log_y: bool = True,
+    stop: int | None = None,
 ) -> Path:
     """An observability index against the number of poses, one line per method (a series
-    shorter than ``counts`` covers its first counts)."""
+    shorter than ``counts`` covers its first counts); ``stop``: the count where the first
+    series stops improving, marked and its plateau shaded."""
     fig, ax = plt.subplots(figsize=(6.5, 4.0), constrained_layout=True)
     for label, values in series.items():
         ax.plot(list(counts)[: len(values)], values, marker=".", label=label)
+    if stop is not None and len(counts):
+        ax.axvline(stop, color="k", lw=0.9, ls="--")
+        ax.axvspan(stop, max(counts), color="0.85", alpha=0.5, lw=0)
+        ax.annotate(
+            f"stops improving at {stop} poses",
+            (stop, 0.95),
+            xycoords=("data", "axes fraction"),
+            xytext=(4, 0),
+            textcoords="offset points",
+            fontsize=8,
+            va="top",
+        )
     if log_y:
         ax.set_yscale("log")
     ax.set_xlabel("number of poses")

@@ -7,7 +7,9 @@ import json
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
+from recording_faces import assert_every_face_has_data
 
 from scenarios.config import ScenarioError, load_scenario
 from scenarios.machine_setup import EFFECTS
@@ -61,7 +63,7 @@ def run(tmp_path_factory):
         seeds=[1],
         none_seeds=[101, 102],
     )
-    return run_scenario(str(path), tmp / "results", quiet=True, record=False)
+    return run_scenario(str(path), tmp / "results", quiet=True)
 
 
 def test_committed_file_is_a_meaningful_benchmark():
@@ -169,3 +171,39 @@ def test_summary_contract_clear_case_and_no_false_alarm(run):
     assert s["correct_rate"] == 1.0
     assert s["false_alarm_rate"] == 0.0
     assert s["heldout_worse_count"] == 0
+    # the figures, in the report and in the recording, whose every view has data
+    assert set(s["figures"]) == {"confusion", "rate_by_size"}
+    report = (out_dir / "report.md").read_text()
+    for file in s["figures"].values():
+        assert (out_dir / file).stat().st_size > 0 and f"]({file})" in report
+    views = assert_every_face_has_data(out_dir / f"{out_dir.name}.rrd")
+    names = {v["name"] for v in views}
+    assert {"true x named effect", "right names by size", "report: key numbers"} <= names
+
+
+def test_confusion_heat_map_counts(tmp_path):
+    """The heat map holds the counts of the table: its image is the confusion matrix."""
+    from scenarios.studies.diagnosis_benchmark.figures import confusion_png
+
+    captured = {}
+    real = figures_module().plt.Axes.imshow
+
+    def spy(ax, data, *args, **kwargs):
+        captured["data"] = np.asarray(data)
+        return real(ax, data, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(figures_module().plt.Axes, "imshow", spy)
+        confusion_png(
+            tmp_path / "c.png",
+            {"backlash": {"backlash": 3, "none": 1}, "none": {"none": 5, "gain_error": 2}},
+        )
+    # rows: backlash, none; columns: backlash, gain_error, none
+    np.testing.assert_array_equal(captured["data"], [[3, 0, 1], [0, 2, 5]])
+    assert (tmp_path / "c.png").stat().st_size > 0
+
+
+def figures_module():
+    from scenarios import figures
+
+    return figures

@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from recording_faces import assert_every_face_has_data
 
 from scenarios.config import ScenarioError, load_scenario
 from scenarios.runner import run_scenario
@@ -86,6 +87,9 @@ def test_figures_report_and_recording(run):
     entities = set(store.schema().entity_paths())
     assert {f"/figures/regime_{e}" for e in ESTIMATORS} <= entities
     assert "/report" in entities
+    views = {v["name"] for v in assert_every_face_has_data(out / "liu_regime.rrd")}
+    named = {f"regime {e}".replace("_", " ") for e in ESTIMATORS}
+    assert named | {"report: key numbers"} <= views
 
 
 def test_placements_are_where_the_issue_puts_them():

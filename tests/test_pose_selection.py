@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from recording_faces import assert_every_face_has_data
 
 from calib.analysis.observability_indices import observability
 from calib.analysis.pose_selection import (
@@ -112,8 +113,12 @@ def test_optimal_poses_scenario_quick(tmp_path):
     text = text.replace('values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/')
     path = tmp_path / "optimal_quick.toml"
     path.write_text(text)
-    s, _ = run_scenario(str(path), tmp_path, quiet=True)
+    s, out = run_scenario(str(path), tmp_path, quiet=True)
     assert s["n_noise_draws"] == 2
+    # the index by pose count is the report's figure (its plateau marked), static; the
+    # selected poses the one timeline
+    views = {v["name"] for v in assert_every_face_has_data(out / f"{out.name}.rrd")}
+    assert "condition index by pose count" in views
     assert len(s["index_by_count"]) == 40 - 9 + 1
     assert 9 < s["n_optimal"] <= 40
     for name in ("optimal", "random_same_count", "random_256"):

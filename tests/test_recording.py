@@ -2,50 +2,22 @@
 
 from __future__ import annotations
 
-from collections import defaultdict
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from recording_faces import CHECKED, Readback, assert_every_face_has_data, blueprint
 
-from scenarios.config import find_scenario
-from scenarios.recording.charts import error_colors
+from scenarios.recording.blueprints import SecondTimeline
+from scenarios.recording.parts import error_colors
 from scenarios.recording.recorder import Recorder
+from scenarios.recording.targets import arrow_scale, label_positions
 from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent
 HEXAPOD = ROOT / "models" / "hexapod_rrrprr.xml"
-rerun_chunk = pytest.importorskip("rerun.chunk")
-
-
-class Readback:
-    """Entity paths, the time points per timeline, and the data columns of an .rrd file."""
-
-    def __init__(self, path: Path) -> None:
-        reader = rerun_chunk.RrdReader(str(path))
-        self.n_blueprints = len(reader.blueprints())
-        store = reader.store()
-        self.entities = set(store.schema().entity_paths())
-        self.times: dict[str, set[int]] = defaultdict(set)  # timeline -> time points
-        self.timelines: dict[str, set[str]] = defaultdict(set)  # entity -> its timelines
-        self.static: dict[str, bool] = {}
-        self.has_static: set[str] = set()
-        self.rows: dict[tuple[str, str], list] = defaultdict(list)  # (entity, column)
-        for chunk in store.stream():
-            batch = chunk.to_record_batch()
-            entity = chunk.entity_path
-            self.static[entity] = chunk.is_static
-            if chunk.is_static:
-                self.has_static.add(entity)
-            for field in batch.schema:
-                kind = (field.metadata or {}).get(b"rerun:kind", b"").decode()
-                if kind == "index" and field.name != "log_time":
-                    self.timelines[entity].add(field.name)
-                    self.times[field.name].update(batch.column(field.name).to_pylist())
-                elif kind == "data":
-                    self.rows[entity, field.name] += batch.column(field.name).to_pylist()
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +48,8 @@ def recorded(tmp_path_factory) -> tuple[Readback, Mechanism, list[np.ndarray]]:
             rec.log_parameters(
                 "fit", ["leg1.dl", "leg2.dl"], np.array([0.1, -0.2]), np.array([0.01, np.nan])
             )
-            rec.log_metric("lm_cost/fit", "lm_iteration", 0, 3.0)
-            rec.log_metric("lm_cost/fit", "lm_iteration", 1, 0.5)
+            rec.log_metric("lm_cost/fit", "pose", 0, 3.0)
+            rec.log_metric("lm_cost/fit", "pose", 1, 0.5)
             rec.log_points("single", "pose", 0, 1.0)  # one point: drawn as a marker
             rec.log_text("verdict", "# Residual\n\n* white")
         assert path.stat().st_size > 0
@@ -118,11 +90,9 @@ def _platform_pose(mech: Mechanism, q: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def test_pose_timeline_and_body_transforms(recorded):
     rb, mech, qs = recorded
-    assert rb.times["pose"] == {0, 1, 2}
-    assert rb.times["lm_iteration"] == {0, 1}
-    # each call carries its own timeline only (a metric does not inherit the pose's time)
-    assert rb.timelines["/metrics/lm_cost/fit"] == {"lm_iteration"}
-    # the viewer opens on "pose" (most curves): the machine is not copied to other timelines
+    # the study's timeline only: rerun's wall-clock ones are off
+    assert set(rb.times) == {"pose"} and rb.times["pose"] == {0, 1, 2}
+    assert rb.timelines["/metrics/lm_cost/fit"] == {"pose"}
     assert rb.timelines["/world/bodies/platform"] == {"pose"}
     entity = "/world/bodies/platform"
     logged_p = np.array([t[0] for t in rb.rows[entity, "Transform3D:translation"]])
@@ -156,7 +126,10 @@ def test_targets_error_map_and_parameters_values(recorded):
     rb, _, _ = recorded
     vectors = np.array(rb.rows["/world/targets/cal/error", "Arrows3D:vectors"][0])
     np.testing.assert_allclose(vectors, np.tile([1e-3, 0.0, -2e-3], (len(vectors), 1)), atol=1e-8)
-    assert "x100" in rb.rows["/world/targets/cal/error", "Arrows3D:labels"][0][0]
+    labels = rb.rows["/world/targets/cal/error_mm", "Points3D:labels"][0]
+    assert labels == ["0.022 mm"] * len(vectors)  # |(0.01, 0, -0.02)| mm, beside each target
+    at = np.array(rb.rows["/world/targets/cal/error_mm", "Points3D:positions"][0])
+    assert len(np.unique(np.round(at, 6), axis=0)) == len(at)  # no two labels in one place
     nodes = "/error_maps/before/layer_220/nodes"
     labels = rb.rows[nodes, "Points3D:labels"][0]
     assert labels[0] == "0.000 mm" and labels[-1] == "0.080 mm"
@@ -207,7 +180,7 @@ def test_disabled_recorder_writes_nothing(tmp_path, monkeypatch):
         rec.log_error_map("s", "l", np.zeros((2, 3)), np.ones(2))
         rec.log_parameters("s", ["a"], np.ones(1), None, np.ones(1))
         rec.log_points("p", "t", 0, 1.0)
-        rec.log_bars("b", ["a"], np.ones(1), "mm")
+        rec.log_figure("f", b"not drawn", "figure")
         rec.log_report("undeclared_effect", {})
         rec.log_metric("x", "t", 0, 1.0)
         rec.log_text("t", "text")
@@ -237,63 +210,6 @@ def test_close_is_idempotent_and_file_readable(tmp_path):
     assert rb.times["t"] == {0} and rb.n_blueprints == 0
 
 
-def _blueprint(path: Path) -> tuple[str, list[dict]]:
-    """The active timeline and the views of the blueprint stored in an .rrd file."""
-    reader = rerun_chunk.RrdReader(str(path))
-    (store,) = reader.blueprints()
-    rows: dict[str, dict] = defaultdict(dict)
-    for chunk in reader.stream(store=store):
-        batch = chunk.to_record_batch()
-        for field in batch.schema:
-            if (field.metadata or {}).get(b"rerun:kind", b"").decode() == "data":
-                rows[chunk.entity_path][field.name] = batch.column(field.name).to_pylist()[-1]
-    timeline = rows["/time_panel"]["TimePanelBlueprint:timeline"][0]
-    views = []
-    for entity, r in rows.items():
-        if "ViewBlueprint:class_identifier" in r:
-            origin = r["ViewBlueprint:space_origin"][0]
-            queries = rows[f"{entity}/ViewContents"]["ViewContents:query"]
-            views.append(
-                {
-                    "kind": r["ViewBlueprint:class_identifier"][0],
-                    "name": r["ViewBlueprint:display_name"][0],
-                    "queries": [q.replace("$origin", origin) for q in queries],
-                }
-            )
-    return timeline, views
-
-
-def _matches(entity: str, query: str) -> bool:
-    e, q = entity.strip("/"), query.strip("/")
-    if q.endswith("/**"):
-        root = q[:-3]
-        return e == root or e.startswith(root + "/")
-    return e == q
-
-
-def assert_every_view_has_data(rb: Readback, path: Path) -> list[dict]:
-    """Each view of the blueprint shows data on the active timeline (or static data); each
-    curve in a plot has more than one point or is drawn as points."""
-    timeline, views = _blueprint(path)
-    assert views
-    with_data = {e for (e, _c) in rb.rows}
-    for view in views:
-        shown = [e for e in with_data if any(_matches(e, q) for q in view["queries"])]
-        live = [e for e in shown if timeline in rb.timelines[e] or e in rb.has_static]
-        assert live, f"view '{view['name']}' has no data on timeline {timeline}"
-        if view["kind"] == "TimeSeries":
-            curves = [e for e in shown if (e, "Scalars:scalars") in rb.rows]
-            assert curves, view["name"]
-            for e in curves:
-                assert timeline in rb.timelines[e], (view["name"], e)
-                n = len(rb.rows[e, "Scalars:scalars"])
-                assert n > 1 or (e, "SeriesPoints:markers") in rb.rows, (view["name"], e, n)
-        if view["kind"] == "3D" and any(q.startswith("world/bodies") for q in view["queries"]):
-            bodies = [e for e in shown if e.count("/") == 3 and timeline in rb.timelines[e]]
-            assert bodies or any(e in rb.has_static for e in shown), view["name"]
-    return views
-
-
 def test_the_blueprint_is_built_from_what_was_logged(tmp_path):
     path = tmp_path / "bp.rrd"
     mech = Mechanism.from_xml(HEXAPOD)
@@ -306,66 +222,113 @@ def test_the_blueprint_is_built_from_what_was_logged(tmp_path):
             rec.log_targets("pose", i, t, t + 1e-5, group="before")
         rec.log_error_map("before", "grid", np.eye(3) * 0.02, np.arange(3.0))
         rec.log_parameters("fit", ["a", "b"], np.ones(2), np.ones(2), np.zeros(2))
-        rec.log_metric("lm_cost/fit", "lm_iteration", 0, 3.0)
-        rec.log_metric("lm_cost/fit", "lm_iteration", 1, 1.0)
-        rec.log_points("heldout/one", "lm_iteration", 0, 1.0)
-        rec.log_metric("elsewhere", "other", 0, 1.0)  # not on the active timeline: no view
+        rec.log_metric("residual/fit", "pose", 0, 3.0)
+        rec.log_metric("residual/fit", "pose", 1, 1.0)
+        rec.log_points("heldout/one", "pose", 0, 1.0)
+        rec.log_figure("cost", _png(), "cost by iteration")  # a curve not against the poses
         rec.log_text("verdict", "**fine**")
-    views = assert_every_view_has_data(Readback(path), path)
+    views = assert_every_face_has_data(path)
     names = [v["name"] for v in views]
-    assert "before: machine, targets and error arrows" in names
-    assert any(n.startswith("before / grid, 0-2 mm") and n.endswith(": error map") for n in names)
-    assert {"parameters: fit", "verdict"} <= set(names)
-    assert not any("elsewhere" in n for n in names)
-    assert _blueprint(path)[0] == "lm_iteration"  # most curves are plotted against it
-    rb = Readback(path)  # and the machine is placed on it too (its first pose)
-    assert rb.timelines["/world/bodies/platform"] == {"pose", "lm_iteration"}
+    assert "before: errors x100" in names
+    assert "before ≤2 mm" in names  # the stage first, its scale's maximum
+    assert {"parameters: fit", "verdict", "cost by iteration"} <= set(names)
+    assert blueprint(path)[0] == "pose"
+    assert Readback(path).times.keys() == {"pose"}
 
 
-SMALLER = {  # the scenario, cut down to seconds: (section, key, full value, smaller value)
-    "hexapod_paper": [
-        ("plans", "many_poses", "256", "40"),
-        ("verification", "nodes_per_axis", "3", "2"),
-        ("verification", "orientations_per_node", "8", "2"),
-    ],
-}
+def _png() -> bytes:
+    from scenarios.figures import plt, png_bytes
+
+    fig, ax = plt.subplots(figsize=(2, 2))
+    ax.semilogy([1, 2, 3], [1e-2, 1e-5, 1e-9])
+    return png_bytes(fig)
 
 
-def _scenario_copy(name: str, tmp_path: Path) -> str:
-    """The shipped scenario file, or a copy with fewer poses (relative paths still resolve
-    from scenarios/ and the repository)."""
-    text = find_scenario(name).read_text()
-    if name not in SMALLER:
-        return name
-    for _section, key, full, small in SMALLER[name]:
-        old = f"{key} = {full}"
-        assert old in text, old
-        text = text.replace(old, f"{key} = {small}")
-    path = tmp_path / f"{name}.toml"
-    path.write_text(text)
-    return str(path)
+def test_a_second_timeline_is_refused(tmp_path):
+    """A curve against another variable than the poses would give the recording a face (that
+    timeline selected) where the machine views are empty: it must be a figure."""
+    mech = Mechanism.from_xml(HEXAPOD)
+    with Recorder(tmp_path / "two.rrd", "two") as rec:
+        rec.log_pose("pose", 0, mech, mech.home_qpos)
+        with pytest.raises(SecondTimeline, match="log_figure"):
+            rec.log_metric("lm_cost", "lm_iteration", 0, 1.0)
+        with pytest.raises(SecondTimeline):
+            rec.log_targets("node", 0, np.zeros((1, 3)), np.ones((1, 3)))
+    assert Readback(tmp_path / "two.rrd").times.keys() == {"pose"}
 
 
-@pytest.mark.parametrize("name", ["hexapod_paper", "serial_arm"])  # and undeclared_effect's:
-def test_scenario_recordings_show_data_in_every_view(tmp_path, name):  # in its own module
+def test_a_face_without_data_is_caught(tmp_path):
+    """The read-back check fails on the recordings this project used to write: a plot on one
+    timeline and the machine on another (either face has an empty view)."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    path = tmp_path / "old.rrd"
+    rec = rr.RecordingStream("old")
+    rec.save(path)
+    rec.set_log_time_enabled(False)
+    rec.set_time("lm_iteration", sequence=0)
+    rec.log("metrics/cost", rr.Scalars(1.0))
+    rec.set_time("lm_iteration", sequence=1)
+    rec.log("metrics/cost", rr.Scalars(0.5))
+    rec.reset_time()
+    rec.set_time("node", sequence=0)
+    rec.log("world/targets/a/nominal", rr.Points3D([[0.0, 0.0, 0.0]]))
+    rec.send_blueprint(
+        rrb.Blueprint(
+            rrb.Horizontal(
+                rrb.TimeSeriesView(origin="metrics", name="cost"),
+                rrb.Spatial3DView(origin="world", name="machine"),
+            ),
+            rrb.TimePanel(timeline="lm_iteration"),
+        )
+    )
+    rec.disconnect()
+    with pytest.raises(AssertionError, match="no data on"):
+        assert_every_face_has_data(path)
+
+
+def test_arrows_are_magnified_to_be_seen_and_labels_set_apart():
+    nominal = np.array([[[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.2, 0.0]]])
+    measured = nominal + np.array([0.0, 0.0, 30e-6])  # 30 um on a 0.2 m target set
+    scale = arrow_scale(nominal, measured)
+    assert scale in (1e3, 2e3, 5e3)  # a 1-2-5 factor
+    assert 0.16 * 0.2 <= 30e-6 * scale <= 0.4 * 0.2  # the arrow 16-40 % of the spread
+    at = label_positions(nominal, 0.2)[0]
+    gaps = np.linalg.norm(at[:, None] - at[None], axis=-1)[np.triu_indices(3, 1)]
+    assert gaps.min() > 0.02  # apart from each other
+    assert np.all(np.linalg.norm(at - nominal[0], axis=1) > 0.005)  # and off their targets
+    assert arrow_scale(nominal, nominal) == 1.0
+
+
+@pytest.mark.parametrize("name", ["serial_arm", "polisher_identifiability", "measured_loop"])
+def test_scenario_recordings_show_data_in_every_face(tmp_path, name):
+    """The studies no other test module runs with a recording (see recording_faces.CHECKED)."""
     from scenarios.runner import run_scenario
 
-    _, out = run_scenario(_scenario_copy(name, tmp_path), tmp_path / "results", quiet=True)
-    path = out / f"{name}.rrd"
-    rb = Readback(path)
-    views = assert_every_view_has_data(rb, path)
+    _, out = run_scenario(name, tmp_path / "results", quiet=True)
+    views = assert_every_face_has_data(out / f"{name}.rrd")
     names = " | ".join(v["name"] for v in views)
     assert "report: key numbers" in names
-    if name == "hexapod_paper":  # one error map per stage, the LM cost per iteration
-        for stage in ("before", "after_random_few", "after_random_many"):
-            assert f"{stage} / verification_grid" in names
-        assert rb.times["lm_iteration"] and len(rb.times["lm_iteration"]) > 1
-    else:  # two variants on their own pose timelines: the view of the one opened on only
-        assert _blueprint(path)[0] == "one_reflector_pose"
-        assert "one_reflector: machine, targets and error arrows" in names
-        assert "three_reflectors" not in names
-        assert rb.times["three_reflectors_pose"]
-        assert any(c == "Capsules3D:lengths" for (_e, c) in rb.rows)  # the arm is drawn
+    if name == "serial_arm":  # both variants on the one pose timeline, each its own arm
+        assert "one reflector: errors x" in names and "three reflectors: errors x" in names
+        rb = Readback(out / f"{name}.rrd")
+        assert rb.times.keys() == {"pose"}
+        assert "/world/one_reflector/bodies/link6" in rb.entities
+        assert "/world/three_reflectors/bodies/link6" in rb.entities
+    elif name == "polisher_identifiability":  # the singular values on a log axis, static
+        assert "singular values of H" in names
+        assert Readback(out / f"{name}.rrd").times.keys() == {"node"}
+
+
+def test_recording_faces_cover_every_study():
+    """Every study's recording is read back face by face by some test module."""
+    from scenarios.runner import STUDIES
+
+    assert set(STUDIES) | {"liu_vs_ols_draws", "sweep"} == set(CHECKED)
+    for module in set(CHECKED.values()):
+        text = (ROOT / "tests" / f"{module}.py").read_text()
+        assert "assert_every_face_has_data(" in text, module
 
 
 def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
@@ -376,19 +339,24 @@ def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
     mech = Mechanism.from_xml(HEXAPOD)
     home = mech.home_qpos[mech.actuator_qpos]
     qs = np.array([forward(mech, home + 0.002 * k).qpos for k in range(3)])
-    nominal = np.array([np.zeros((2, 3)) + k for k in range(3)])
+    # two targets 1 cm apart moving 1 mm a pose: one pose's spread and all poses' are the
+    # smallest one (5 cm), so label offsets and radii agree pose by pose and at once
+    nominal = (
+        np.array([[[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]] for _ in range(3)])
+        + np.arange(3)[:, None, None] * 1e-3
+    )
     measured = nominal + 1e-5
     back = {}
     for how in ("columns", "one_by_one"):
         path = tmp_path / f"{how}.rrd"
         with Recorder(path, "pkm-calib-test") as rec:
             if how == "columns":
-                rec.log_poses("pose", [4, 5, 6], mech, qs, nominal, measured, "cal")
+                rec.log_poses("pose", [4, 5, 6], mech, qs, nominal, measured, "cal", 100.0)
             else:
                 for k, q, a, b in zip([4, 5, 6], qs, nominal, measured, strict=True):
                     rec.log_pose("pose", k, mech, q)
                     rec.log_targets("pose", k, a, b, group="cal")
-            assert rec.logged.pose_timelines["pose"] == {4, 5, 6}
+            assert rec.logged.poses == {4, 5, 6} and rec.logged.timeline == "pose"
         back[how] = Readback(path)
     a, b = back["columns"], back["one_by_one"]
     assert a.entities == b.entities and a.times["pose"] == b.times["pose"] == {4, 5, 6}

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from recording_faces import assert_every_face_has_data
 
 from calib.data import read_dataset
 from scenarios.__main__ import main as cli
@@ -20,6 +21,17 @@ def hexapod_run(tmp_path_factory):
     results = tmp_path_factory.mktemp("results")
     summary, out_dir = run_scenario("hexapod_paper", results, quiet=True)
     return summary, out_dir
+
+
+def test_the_recording_has_one_face_with_data_in_every_view(hexapod_run):
+    """The LM cost is a static figure (log axis), not a second timeline: the verification
+    nodes are the one timeline, and every view has data on it."""
+    _, out_dir = hexapod_run
+    views = {v["name"] for v in assert_every_face_has_data(out_dir / "hexapod_paper.rrd")}
+    assert "LM cost by iteration" in views
+    for stage in ("before", "after_random_few", "after_random_many"):
+        assert any(v.startswith(f"{stage}: errors x") for v in views), stage
+        assert any(v.startswith(f"{stage} ≤") for v in views), stage  # its error map
 
 
 @pytest.mark.accuracy

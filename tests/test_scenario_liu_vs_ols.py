@@ -9,8 +9,12 @@ loop (diagnosis, the named effect modelled, refit, compensation) below the OLS r
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
+from recording_faces import assert_every_face_has_data
 
 from calib.estimators.liu_cv import LiuCV, _folds
 from calib.estimators.ols import OLS
@@ -28,6 +32,11 @@ def summary(tmp_path_factory):
     assert (out_dir / "summary.json").is_file() and (out_dir / "report.md").is_file()
     for name in s["figures"].values():
         assert (out_dir / name).stat().st_size > 1000
+    # the recording: every view has data on its timeline; the loop has a view of its own
+    # (the diagnosis figure) and a machine view, beside OLS's and Liu's
+    views = {v["name"] for v in assert_every_face_has_data(out_dir / "liu_vs_ols.rrd")}
+    assert f"loop: {s['loop']['diagnosed_effect']}" in views
+    assert {"loop, test layer", "ols, test layer"} <= {n.split(":")[0] for n in views}
     return s
 
 
@@ -238,3 +247,30 @@ def test_liu_cv_folds_keep_poses_whole():
     assert sorted(set(labels.tolist())) == [0, 1, 2, 3, 4]
     with pytest.raises(ValueError, match="whole poses"):
         _folds(10, 9, 2)
+
+
+def test_draw_study_records_the_distribution_of_liu_minus_ols(tmp_path):
+    """Two draws in this process: the report's figure (estimator - OLS over the draws) is a
+    view of the recording, and every view has data."""
+    root = Path(__file__).resolve().parent.parent
+    text = (root / "scenarios" / "studies" / "liu_vs_ols" / "liu_vs_ols_draws.toml").read_text()
+    for old, new in (("n = 100", "n = 2"), ('engine = "ray"', 'engine = "local"')):
+        assert old in text, old
+        text = text.replace(old, new)
+    draws = text.index("[draws]")  # two estimators of the draws' list: seconds, not a minute
+    text = text[:draws] + re.sub(
+        r"estimators = \[.*?\]\n",
+        'estimators = ["ols", "liu"]\n',
+        text[draws:],
+        count=1,
+        flags=re.S,
+    )
+    path = tmp_path / "liu_vs_ols_draws.toml"
+    path.write_text(text)
+    s, out = run_scenario(str(path), tmp_path / "results", quiet=True)
+    assert s["draws"]["n"] == 2 and (out / "draws_liu_minus_ols.png").stat().st_size > 1000
+    views = assert_every_face_has_data(out / "liu_vs_ols_draws.rrd")
+    assert {v["name"] for v in views} == {
+        "estimator minus OLS over the draws",
+        "report: key numbers",
+    }

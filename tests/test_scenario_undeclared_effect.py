@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from recording_faces import Readback, assert_every_face_has_data
 
 from calib.cli.commands import main as calib_cli
 from scenarios.runner import run_scenario
@@ -89,20 +91,38 @@ def test_diagnose_command_on_the_scenario_files(run, tmp_path, capsys):
 
 
 def test_the_recording_shows_data_in_every_view(run):
-    """The scenario's rerun recording, read back as test_recording reads the other
-    scenarios': every view has data; the loop's residual before and after, the verdict."""
-    from test_recording import Readback, assert_every_view_has_data
-
-    _, out_dir = run
+    """The scenario's rerun recording, read back: every view has data on its one timeline;
+    the loop's cause, one view per named effect against the variable that explains it (the
+    report's figure for the first), the candidates by name, the verdict."""
+    s, out_dir = run
     path = out_dir / "undeclared_effect.rrd"
     rb = Readback(path)
-    views = assert_every_view_has_data(rb, path)
-    names = " | ".join(v["name"] for v in views)
-    assert "report: key numbers" in names
-    assert "verdict" in names and "residual mm against measurement order" in names
+    views = assert_every_face_has_data(path)
+    names = [v["name"] for v in views]
+    assert "report: key numbers" in names and "verdict" in names
+    named = s["diagnosed_effect"].split("+")
+    assert len(named) == 2  # lead error and thermal growth, both found
+    assert f"{named[0]}: the diagnosis figure" in names  # the report's figure, the same bytes
+    blob = rb.rows["/figures/cause_" + named[0], "EncodedImage:blob"][0][0]
+    assert bytes(blob) == (out_dir / s["figure"]).read_bytes()
+    for effect in named[1:]:
+        assert any(n.startswith(f"{effect}: residual by ") for n in names), names
+    assert "thermal_growth: residual by measurement order (pose)" in names
+    assert "candidates held out" in names
     verdict = rb.rows["/verdict", "TextDocument:text"][0][0]
     assert "Verdict:" in verdict and "tracker noise floor" in verdict
     assert len(rb.rows["/metrics/residual_mm/with_named_effect", "Scalars:scalars"]) > 1
+
+
+def test_an_effects_plot_isolates_it():
+    """Without the effect (the others applied) the residual is larger than with all, and
+    the variable of a lead error is the command modulo its pitch."""
+    from scenarios.loop_figures import EffectPlot, effect_png, per_pose_rms_mm
+
+    measured = np.zeros((4, 2, 3))
+    assert per_pose_rms_mm(measured, measured + 1e-3).tolist() == pytest.approx([1.0] * 4)
+    plot = EffectPlot("x", "v (mm)", np.arange(4.0), np.ones(4), np.ones(4) / 2)
+    assert effect_png(plot, 0.1, ["y"])[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_unknown_effect_in_a_scenario_is_named(tmp_path):

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from recording_faces import assert_every_face_has_data
 from sweep_support import QUICK, figures_off
 
 from scenarios.config import ScenarioError, load_scenario
@@ -86,6 +87,8 @@ def test_over_truth_holds_the_noise_and_draws_each_truth(tmp_path):
     assert s["n_runs"] == 2 and s["n_failed"] == 0
     truths = [(out / r["run_id"] / "truth_values.toml").read_text() for r in s["runs"]]
     assert truths[0] != truths[1]
+    # the sweep's recording: the runs on one timeline, every view with data on it
+    assert_every_face_has_data(out / f"{out.parent.name}_sweep.rrd")
     assert {r["seeds"]["noise_seed"] for r in s["runs"]} == {7}
     # --over noise: one truth (the scenario's own seed's), noise seeds per run
     with figures_off():

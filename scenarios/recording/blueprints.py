@@ -1,13 +1,13 @@
 """The layout of a recording, built from what the study logged (see ``recording.Logged``).
 
-One blueprint per recording, assembled when the recorder closes: the machine with the
-targets and error arrows of each pose group (one 3D view per group), one labelled error-map
-view per stage and layer, a report's figures (one 2D view each), one plot per family of
-curves on the active timeline, bar charts, and text views (the verdict, the report's key
-numbers, one parameter table per stage).
-A view is made only for data that exists; a curve on another timeline than the active one
-is not given a view (rerun plots against the active timeline only), nor is a pose group
-posed on another pose timeline (``build_blueprint(log, timeline=...)`` opens on that one).
+One blueprint per recording, assembled when the recorder closes. A recording has at most one
+timeline (the poses'), so the layout has one face: every view holds data on it. Curves against
+anything else (an iteration, a rank index, a pose count, a variable that explains an effect)
+are static figures (``Recorder.log_figure``), shown on any timeline. The views: the machine
+with the targets and error arrows of each pose group (one 3D view per group, the camera on
+its targets), one labelled error-map view per stage and layer, the figures, one plot per
+family of curves on the timeline, bar charts, and text views (the verdict, the report's key
+numbers, one parameter table per stage). A view is made only for data that exists.
 """
 
 from __future__ import annotations
@@ -36,14 +36,14 @@ class Bounds:
     def empty(self) -> bool:
         return not np.all(np.isfinite(self.lo))
 
-    def eye(self, rr_blueprint: Any, direction=(1.0, -1.3, 0.8)) -> Any | None:
-        """Camera looking at the box centre from far enough to see all of it."""
+    def eye(self, rr_blueprint: Any, direction=(1.0, -1.3, 0.8), distance: float = 1.5) -> Any:
+        """Camera looking at the box centre from ``distance`` times its size (None: empty)."""
         if self.empty:
             return None
         centre = (self.lo + self.hi) / 2
         size = max(float(np.max(self.hi - self.lo)), 0.05)
         d = np.asarray(direction, dtype=float)
-        position = centre + 1.5 * size * d / np.linalg.norm(d)
+        position = centre + distance * size * d / np.linalg.norm(d)
         return rr_blueprint.EyeControls3D(
             position=position.tolist(), look_target=centre.tolist(), eye_up=[0.0, 0.0, 1.0]
         )
@@ -51,7 +51,7 @@ class Bounds:
 
 @dataclass
 class Series:
-    """A curve under ``metrics/``: its timeline, its time points, drawn as points or lines."""
+    """A curve under ``metrics/``: its time points, drawn as points or lines."""
 
     timeline: str
     indices: set[int] = field(default_factory=set)
@@ -71,29 +71,52 @@ class ErrorMap:
 
 
 @dataclass
+class TargetGroup:
+    """A pose group's targets: its view name, the machine it sits on, where its targets are."""
+
+    name: str
+    machine: str = ""
+    bounds: Bounds = field(default_factory=Bounds)
+
+
+class SecondTimeline(ValueError):
+    """A recording logged against a second timeline: its face would show the first's views
+    empty (rerun plots and poses follow the one timeline selected)."""
+
+
+@dataclass
 class Logged:
     """What a study logged, in the order it logged it: the blueprint is built from this."""
 
-    mechanism: bool = False
-    pose_timelines: dict[str, set[int]] = field(default_factory=dict)
-    target_groups: dict[str, str] = field(default_factory=dict)  # path part -> name
-    group_timelines: dict[str, str] = field(default_factory=dict)  # path part -> timeline
+    machines: list[str] = field(default_factory=list)  # "" is the machine under world/bodies
+    timeline: str | None = None  # the one timeline (poses, per-pose curves)
+    poses: set[int] = field(default_factory=set)  # its time points that place a machine
+    target_groups: dict[str, TargetGroup] = field(default_factory=dict)  # path part -> group
     machine_bounds: Bounds = field(default_factory=Bounds)
     error_maps: dict[str, ErrorMap] = field(default_factory=dict)  # entity path -> map
     series: dict[str, Series] = field(default_factory=dict)  # entity path -> curve
+    figures: dict[str, str] = field(default_factory=dict)  # entity path -> view name
     bars: dict[str, str] = field(default_factory=dict)  # entity path -> view name
     texts: dict[str, str] = field(default_factory=dict)  # entity path -> view name
-    images: dict[str, str] = field(default_factory=dict)  # entity path -> view name
+
+    @property
+    def mechanism(self) -> bool:
+        return bool(self.machines)
+
+    def use_timeline(self, timeline: str) -> None:
+        """Note that data goes on ``timeline``; a second one raises :class:`SecondTimeline`."""
+        if self.timeline is None:
+            self.timeline = timeline
+        elif timeline != self.timeline:
+            raise SecondTimeline(
+                f"the recording's timeline is '{self.timeline}'; logging against "
+                f"'{timeline}' too would give it a face where the other views are empty: "
+                f"draw that curve as a figure (Recorder.log_figure) or put it on "
+                f"'{self.timeline}'"
+            )
 
     def active_timeline(self) -> str | None:
-        """The timeline the viewer opens on: the one most curves are plotted against (a
-        recording then shows every view filled), else the first pose timeline."""
-        counts: dict[str, int] = {}
-        for s in self.series.values():
-            counts[s.timeline] = counts.get(s.timeline, 0) + 1
-        if counts:
-            return max(counts, key=lambda t: (counts[t], t in self.pose_timelines))
-        return next(iter(self.pose_timelines), None)
+        return self.timeline
 
 
 TEXT_ORDER = ("verdict", "report")
@@ -121,24 +144,37 @@ def _stack(rrb: Any, parts: list[Any], shares: list[float]) -> Any | None:
     return rrb.Vertical(*parts, row_shares=shares)
 
 
-def machine_views(rrb: Any, log: Logged, active: str | None = None) -> list[Any]:
-    if not (log.mechanism or log.target_groups):
-        return []
-    eye = log.machine_bounds.eye(rrb)
-    groups: dict[str | None, str | None] = dict(log.target_groups) or {None: None}
-    timeline = log.active_timeline() if active is None else active
-    here = {g: n for g, n in groups.items() if log.group_timelines.get(g) == timeline}
-    groups = here or groups  # groups posed on another timeline would be empty views
+def _machine_contents(machine: str) -> list[str]:
+    root = f"world/{machine}/bodies" if machine else "world/bodies"
+    return ["world", f"{root}/**"]
+
+
+def machine_views(rrb: Any, log: Logged) -> list[Any]:
+    """One 3D view per pose group (its machine, its targets and arrows), the camera on the
+    group's targets; a machine without targets gets a view of its own."""
     views = []
-    for g, label in groups.items():
-        contents = ["world", "world/bodies/**"]
-        name = "machine"
-        if g is not None:
-            contents.append(f"world/targets/{g}/**")
-            name = f"{label}: machine, targets and error arrows"
+    for part, group in log.target_groups.items():
+        contents = [*_machine_contents(group.machine), f"world/targets/{part}/**"]
+        bounds = group.bounds if not group.bounds.empty else log.machine_bounds
         views.append(
-            rrb.Spatial3DView(origin="world", contents=contents, name=name, eye_controls=eye)
+            rrb.Spatial3DView(
+                origin="world",
+                contents=contents,
+                name=group.name,
+                eye_controls=bounds.eye(rrb, distance=2.6),
+            )
         )
+    shown = {g.machine for g in log.target_groups.values()}
+    for machine in log.machines:
+        if machine not in shown:
+            views.append(
+                rrb.Spatial3DView(
+                    origin="world",
+                    contents=_machine_contents(machine),
+                    name=f"machine {machine}".strip(),
+                    eye_controls=log.machine_bounds.eye(rrb),
+                )
+            )
     return views
 
 
@@ -148,39 +184,40 @@ def error_map_views(rrb: Any, log: Logged) -> Any | None:
         view = rrb.Spatial3DView(
             origin=path,
             contents=["$origin/**"],
-            name=f"{em.stage} / {em.layer}, 0-{em.vmax_mm:.3g} mm: error map",
+            name=f"{em.stage} ≤{em.vmax_mm:.2g} mm",
             eye_controls=em.bounds.eye(rrb, direction=(0.35, -0.6, 1.0)),
         )
         by_layer.setdefault(em.layer, []).append(view)
-    rows = [_row(rrb, views, name=f"error maps: {layer}") for layer, views in by_layer.items()]
+    rows = [  # a row of a few maps; more in tabs, where each title has room
+        _row(rrb, views, name=f"error maps: {layer}")
+        if len(views) <= 4
+        else rrb.Tabs(*views, name=f"error maps: {layer}")
+        for layer, views in by_layer.items()
+    ]
     if not rows:
         return None
     return rows[0] if len(rows) == 1 else rrb.Tabs(*rows)
 
 
-def image_views(rrb: Any, log: Logged) -> Any | None:
-    """A report's figures (heat maps ...), all at once: one 2D view each, in a grid."""
-    views = [
-        rrb.Spatial2DView(origin=p, contents=["$origin"], name=n) for p, n in log.images.items()
+def figure_views(rrb: Any, log: Logged) -> list[Any]:
+    return [
+        rrb.Spatial2DView(origin=p, contents=["$origin"], name=n) for p, n in log.figures.items()
     ]
-    if not views:
-        return None
-    return views[0] if len(views) == 1 else rrb.Grid(*views, name="figures")
 
 
-def series_views(rrb: Any, log: Logged, timeline: str | None) -> list[Any]:
+def series_views(rrb: Any, log: Logged) -> list[Any]:
     families: dict[str, list[str]] = {}
-    for path, s in log.series.items():
-        if s.timeline == timeline:
-            families.setdefault(_family(path), []).append(path)
+    for path in log.series:
+        families.setdefault(_family(path), []).append(path)
     views = []
+    timeline = (log.timeline or "").replace("_", " ")
     for family, paths in families.items():
         label = family.split("/", 1)[-1].replace("_", " ")
         views.append(
             rrb.TimeSeriesView(
                 origin=family,
-                contents=[f"{p}" for p in paths],
-                name=f"{label} against {timeline.replace('_', ' ')}",
+                contents=list(paths),
+                name=f"{label} by {timeline}",
                 plot_legend=rrb.PlotLegend(visible=len(paths) > 1),
             )
         )
@@ -199,28 +236,40 @@ def text_views(rrb: Any, log: Logged) -> Any | None:
     return views[0] if len(views) == 1 else rrb.Tabs(*views)
 
 
-def build_blueprint(log: Logged, timeline: str | None = None) -> Any:
-    """The blueprint of a recording; ``timeline`` overrides the one the viewer opens on."""
+def _plots(rrb: Any, views: list[Any], alone: bool) -> Any | None:
+    """Figures and curves: side by side up to two; beyond, in tabs beside a machine, or all
+    at once in a grid when they are the recording's only pictures (``alone``)."""
+    if not views:
+        return None
+    if len(views) <= 2:
+        return _row(rrb, views)
+    return rrb.Grid(*views, name="figures") if alone else rrb.Tabs(*views)
+
+
+def build_blueprint(log: Logged) -> Any:
+    """The blueprint of a recording: the machine views and error maps on the left, the
+    figures and plots and the text views on the right (with no error map, the plots take the
+    error maps' place under the machine)."""
     import rerun.blueprint as rrb
 
-    timeline = timeline or log.active_timeline()
-    machine = machine_views(rrb, log, timeline)
+    machine = machine_views(rrb, log)
     maps = error_map_views(rrb, log)
+    plots = _plots(rrb, figure_views(rrb, log) + series_views(rrb, log), not (machine or maps))
     left_parts, left_shares = [], []
+    right_parts, right_shares = [], []
     if machine:
         left_parts.append(_row(rrb, machine))
         left_shares.append(3.0)
     if maps is not None:
         left_parts.append(maps)
         left_shares.append(2.0)
-    images = image_views(rrb, log)
-    if images is not None:
-        left_parts.append(images)
-        left_shares.append(3.0)
-    right_parts, right_shares = [], []
-    for view in series_views(rrb, log, timeline):
-        right_parts.append(view)
-        right_shares.append(1.0)
+    if plots is not None:
+        if machine and maps is None:
+            left_parts.append(plots)
+            left_shares.append(2.5)
+        else:
+            right_parts.append(plots)
+            right_shares.append(1.5)
     texts = text_views(rrb, log)
     if texts is not None:
         right_parts.append(texts)
@@ -233,14 +282,15 @@ def build_blueprint(log: Logged, timeline: str | None = None) -> Any:
     elif len(columns) == 1:
         root = columns[0]
     else:
-        root = rrb.Horizontal(*columns, column_shares=[3.0, 2.0])
+        root = rrb.Horizontal(*columns, column_shares=[5.0, 4.0])
+    timeline = log.timeline
     panels = [
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        # no timeline: nothing to scrub through (an empty TimePanel() was a chunk rerun
-        # dropped with a warning, leaving the panel open)
-        rrb.TimePanel(state="collapsed", timeline=timeline)
+        # paused on the first pose; no timeline: nothing to scrub through, no panel (it
+        # would offer the viewer's own wall-clock timeline, with nothing on it)
+        rrb.TimePanel(state="collapsed", timeline=timeline, play_state="paused")
         if timeline
-        else rrb.TimePanel(state="collapsed"),
+        else rrb.TimePanel(state="hidden"),
     ]
     return rrb.Blueprint(root, *panels, auto_layout=False, auto_views=False)

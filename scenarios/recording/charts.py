@@ -1,9 +1,8 @@
-"""Charts and text in a recording: error maps with their colour scale, metrics, bars, the
-estimates and the report as text views, figures, and the loop's residuals and verdict."""
+"""The charts and documents of a recording: error maps with their colour scales, estimates
+as tables, metrics on the timeline, static figures, markdown texts, the loop's views."""
 
 from __future__ import annotations
 
-import functools
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -12,28 +11,17 @@ from typing import Any
 import numpy as np
 
 from scenarios.recording.blueprints import Bounds, ErrorMap, Series
+from scenarios.recording.parts import (
+    colour_scale,
+    error_colors,
+    merge_nodes,
+    node_spacing,
+    parameter_table,
+)
 from scenarios.recording.session import _active, entity_part
 from twin.mechanism import Mechanism
 
 ERROR_MAP_RADIUS = 0.004  # metres
-
-
-@functools.cache
-def _viridis() -> Any:
-    """The viridis colour map, looked up once (each lookup copies it and builds its table)."""
-    from matplotlib import colormaps
-
-    return colormaps["viridis"]
-
-
-def error_colors(values: np.ndarray, vmax: float) -> np.ndarray:
-    """RGB (N, 3) uint8 from viridis over [0, vmax]; NaN values come out grey."""
-    v = np.asarray(values, dtype=float)
-    rgb = _viridis()(np.clip(np.nan_to_num(v) / max(vmax, 1e-300), 0.0, 1.0))[:, :3]
-    rgb[~np.isfinite(v)] = 0.5
-    return np.round(rgb * 255).astype(np.uint8)
-
-
 RELATIVE_IMAGE = re.compile(r"!\[([^\]]*)\]\((?![a-zA-Z][a-zA-Z0-9+.-]*:)([^)\s]+)\)")
 
 
@@ -44,75 +32,8 @@ def viewer_markdown(markdown: str) -> str:
     return RELATIVE_IMAGE.sub(r"*Figure: \1 (`\2`, beside the recording)*", markdown)
 
 
-def merge_nodes(positions: np.ndarray, errors: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Unique positions (to 0.1 um), the largest error at each, and how many shared it."""
-    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
-    if len(positions) != len(errors):
-        return positions, errors, np.ones(len(positions), dtype=int)
-    keys = np.round(positions * 1e7).astype(np.int64)
-    _, first, inverse, counts = np.unique(
-        keys, axis=0, return_index=True, return_inverse=True, return_counts=True
-    )
-    inverse = inverse.ravel()
-    worst = np.full(len(first), -np.inf)
-    np.maximum.at(worst, inverse, np.where(np.isfinite(errors), errors, -np.inf))
-    worst[~np.isfinite(worst)] = np.nan
-    order = np.argsort(first)  # keep the logged order of first appearance
-    return positions[first[order]], worst[order], counts[order]
-
-
-def node_spacing(nodes: np.ndarray) -> float:
-    """The smallest distance between two nodes (metres); 1 cm for fewer than two."""
-    if len(nodes) < 2:
-        return 0.01
-    d = np.linalg.norm(nodes[:, None, :] - nodes[None, :, :], axis=-1)
-    d[np.diag_indices(len(nodes))] = np.inf
-    return float(max(d.min(), 1e-4))
-
-
-def colour_scale(
-    bounds: Bounds, spacing: float, vmax: float, n: int = 10
-) -> tuple[np.ndarray, list[float], np.ndarray, list[str]]:
-    """A vertical column of ``n`` boxes beside the nodes (viridis, 0 at the bottom) and two
-    labelled ticks, 0 and vmax in mm (a middle label overlaps them in a small view)."""
-    size = bounds.hi - bounds.lo
-    height = max(float(size.max()), 4 * spacing)
-    x = bounds.hi[0] + 1.5 * spacing
-    y = (bounds.lo[1] + bounds.hi[1]) / 2
-    z0 = (bounds.lo[2] + bounds.hi[2]) / 2 - height / 2
-    step = height / n
-    centres = np.array([[x, y, z0 + (k + 0.5) * step] for k in range(n)])
-    half = [0.25 * spacing, 0.25 * spacing, step / 2]
-    ticks = np.array([[x + 0.4 * spacing, y, z0 + f * height] for f in (0.0, 1.0)])
-    return centres, half, ticks, [f"{f * vmax:.3g} mm" for f in (0.0, 1.0)]
-
-
-def parameter_table(
-    stage: str,
-    names: Sequence[str],
-    estimates: np.ndarray,
-    std: np.ndarray | None,
-    truth: np.ndarray | None,
-    unit: str,
-) -> str:
-    est = np.asarray(estimates, dtype=float)
-    head = ["parameter", f"estimate ({unit})", "std"]
-    if truth is not None:
-        head += ["truth", "estimate - truth", "|dev| / std"]
-    rows = [f"### {stage}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for k, name in enumerate(names):
-        s = float("nan") if std is None else float(std[k])
-        cells = [name, f"{est[k]:.4g}", "" if std is None else f"{s:.4g}"]
-        if truth is not None:
-            dev = est[k] - float(truth[k])
-            z = abs(dev) / s if np.isfinite(s) and s > 0 else float("nan")
-            cells += [f"{float(truth[k]):.4g}", f"{dev:+.3g}", f"{z:.2g}"]
-        rows.append("| " + " | ".join(cells) + " |")
-    return "\n".join(rows)
-
-
 class ChartViews:
-    """Error maps, metrics, bars, text, images and the loop (a mixin of Recorder)."""
+    """The charts and texts of a Recorder (a mixin of session.RecorderBase)."""
 
     @_active
     def log_error_map(
@@ -171,6 +92,7 @@ class ChartViews:
                 static=True,
             )
             bounds.add(centres)
+            bounds.add(ticks + np.array([0.3 * float(np.max(bounds.hi - bounds.lo)), 0.0, 0.0]))
         self.logged.error_maps[root] = ErrorMap(stage, layer, vmax, bounds)
 
     @_active
@@ -212,13 +134,15 @@ class ChartViews:
         s.indices.add(int(index))
 
     @_active
-    def log_bars(self, name: str, labels: Sequence[str], values: np.ndarray, unit: str) -> None:
-        """A static bar chart ``bars/<name>``; the view's name lists the bars in order."""
-        values = np.nan_to_num(np.asarray(values, dtype=float))
-        self._rec.log(f"bars/{name}", self.rr.BarChart(values), static=True)
-        self.logged.bars[f"bars/{name}"] = f"{name.replace('_', ' ')} ({unit}): " + ", ".join(
-            labels
-        )
+    def log_figure(self, name: str, png: bytes | str | Path, title: str) -> None:
+        """A static figure (PNG bytes, or a PNG file such as a report's figure) in a 2D view
+        titled ``title``: shown on any timeline, with the axes, names and log scales that a
+        plot of rerun's cannot draw. ``figures.png_bytes`` turns a matplotlib figure into it."""
+        data = Path(png).read_bytes() if isinstance(png, str | Path) else bytes(png)
+        path = f"figures/{entity_part(name)}"
+        image = self.rr.EncodedImage(contents=data, media_type="image/png")
+        self._rec.log(path, image, static=True)
+        self.logged.figures[path] = title
 
     @_active
     def log_text(self, path: str, markdown: str, name: str | None = None) -> None:
@@ -231,11 +155,9 @@ class ChartViews:
 
     @_active
     def log_image(self, name: str, png: Path) -> None:
-        """A figure of the report (a PNG written beside the recording) as a static image,
-        ``figures/<name>``, in a 2D view of its own."""
-        path = f"figures/{entity_part(name)}"
-        self._rec.log(path, self.rr.EncodedImage(path=Path(png)), static=True)
-        self.logged.images[path] = name.replace("_", " ")
+        """A figure of the report (a PNG written beside the recording): :meth:`log_figure`
+        titled by its name."""
+        self.log_figure(name, png, name.replace("_", " "))
 
     @_active
     def log_loop(
@@ -251,6 +173,14 @@ class ChartViews:
         from scenarios.recording.loop import log_loop
 
         log_loop(self, mech, order, prediction, measured, after)
+
+    @_active
+    def log_causes(self, diag: Any, figure: Path | None, plots: list[Any], noise_mm: float) -> None:
+        """The loop's cause: one figure per named effect against the variable that explains
+        it (the diagnosis's own ``figure`` for the first), and the candidates held out."""
+        from scenarios.recording.loop import log_causes
+
+        log_causes(self, diag, figure, plots, noise_mm)
 
     @_active
     def log_verdict(

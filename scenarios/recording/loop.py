@@ -1,11 +1,16 @@
-"""What the loop-closing scenarios log: each pose's residual before and after the named effect
-was added, against the measurement order, and the verdict as text."""
+"""What the loop-closing scenarios log: each pose's residual before and after the named
+effects were added (arrows on the machine, and against the measurement order), one figure per
+named effect against the variable that explains it (scenarios.loop_figures), the candidates'
+held-out errors by name, and the verdict as text."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from scenarios.recording.targets import arrow_scale
 
 ORDER_TIMELINE = "measurement_order"
 
@@ -22,15 +27,13 @@ def log_loop(
     prediction: Any,
     measured: np.ndarray,
     after: np.ndarray,
-    scale: float = 1000.0,
 ) -> None:
-    """Poses by measurement order with the residual arrows before and after (magnified
-    ``scale``x), and both residuals as points against the order."""
+    """Poses by measurement order with the residual arrows before and after (both magnified
+    by the same factor, chosen for the residual before), and both residuals as points
+    against the order."""
     order = np.asarray(order, dtype=int)
-    groups = {
-        "geometry only (residual x1000)": prediction.targets,
-        "with the named effect (residual x1000)": after,
-    }
+    scale = arrow_scale(prediction.targets, measured)
+    groups = {"geometry only": prediction.targets, "with the named effect": after}
     for group, predicted in groups.items():
         rec.log_poses(
             ORDER_TIMELINE, order, mech, prediction.qpos, predicted, measured, group, scale
@@ -40,6 +43,33 @@ def log_loop(
     for k, b, a in zip(order, before_mm, after_mm, strict=True):
         rec.log_points("residual_mm/geometry_only", ORDER_TIMELINE, k, b)
         rec.log_points("residual_mm/with_named_effect", ORDER_TIMELINE, k, a)
+
+
+def log_causes(
+    rec: Any,
+    diag: Any,
+    figure: Path | None,
+    plots: list[Any],
+    noise_mm: float,
+) -> None:
+    """One view per named effect: the diagnosis's figure (``figure``, the report's) for the
+    first, a figure of ``plots`` (loop_figures.effect_plots) for each further one; then the
+    candidates' held-out RMS over the noise, by name."""
+    from scenarios.loop_figures import effect_png, heldout_png
+
+    named = [p.effect for p in plots]
+    for k, plot in enumerate(plots):
+        title = f"{plot.effect}: residual by {plot.variable}"
+        if k == 0 and figure is not None and Path(figure).is_file():
+            rec.log_figure(f"cause_{plot.effect}", figure, f"{plot.effect}: the diagnosis figure")
+        else:
+            others = [n for n in named if n != plot.effect]
+            rec.log_figure(f"cause_{plot.effect}", effect_png(plot, noise_mm, others), title)
+    if not plots and figure is not None and Path(figure).is_file():
+        rec.log_figure("cause", figure, f"diagnosis: {diag.chosen}")
+    ratio = {n: sc.heldout_rms_mm / diag.noise_floor_rms_mm for n, sc in diag.scores.items()}
+    if ratio:
+        rec.log_figure("heldout", heldout_png(ratio, diag.chosen), "candidates held out")
 
 
 def verdict_markdown(diag: Any, before_mm: float, after_mm: float, noise_mm: float) -> str:

@@ -1,5 +1,5 @@
-"""The machine in a recording: its bodies and geoms, its poses on pose timelines, and the
-nominal and measured targets with their errors magnified."""
+"""The machine in a recording: its bodies and geoms, its poses on the pose timeline, and the
+nominal and measured targets with their errors magnified and labelled in mm."""
 
 from __future__ import annotations
 
@@ -9,49 +9,19 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from scenarios.recording.session import _active, _error_labels, entity_part
+from scenarios.recording.blueprints import TargetGroup
+from scenarios.recording.parts import _name, _xyzw, geom_shape
+from scenarios.recording.session import _active, entity_part
+from scenarios.recording.targets import (
+    arrow_scale,
+    error_labels,
+    label_positions,
+    radii,
+    spread,
+)
 from twin.mechanism import Mechanism
 
-TARGET_RADIUS = 0.003  # metres
-
-
 NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
-
-
-def _name(m: mujoco.MjModel, kind: mujoco.mjtObj, i: int, fallback: str) -> str:
-    return mujoco.mj_id2name(m, kind, i) or f"{fallback}{i}"
-
-
-def _xyzw(wxyz: np.ndarray) -> list[float]:
-    w, x, y, z = (float(c) for c in wxyz)
-    return [x, y, z, w]
-
-
-def geom_shape(rr: Any, m: mujoco.MjModel, g: int) -> Any | None:
-    """Geom ``g`` as a rerun archetype in the geom's own frame (None: planes, height fields)."""
-    size, kind, t = m.geom_size[g], int(m.geom_type[g]), mujoco.mjtGeom
-    color = [np.round(np.asarray(m.geom_rgba[g]) * 255).astype(np.uint8)]
-    if kind == t.mjGEOM_CAPSULE:  # rerun's capsule runs from z = 0 to z = length
-        half = float(size[1])
-        return rr.Capsules3D(
-            lengths=[2 * half], radii=[size[0]], translations=[[0, 0, -half]], colors=color
-        )
-    if kind in (t.mjGEOM_SPHERE, t.mjGEOM_ELLIPSOID):
-        half_sizes = [[size[0]] * 3] if kind == t.mjGEOM_SPHERE else [size]
-        return rr.Ellipsoids3D(half_sizes=half_sizes, colors=color, fill_mode="solid")
-    if kind == t.mjGEOM_CYLINDER:  # both centred on the origin, along z
-        return rr.Cylinders3D(lengths=[2 * float(size[1])], radii=[size[0]], colors=color)
-    if kind == t.mjGEOM_BOX:
-        return rr.Boxes3D(half_sizes=[size], colors=color, fill_mode="solid")
-    if kind == t.mjGEOM_MESH and m.geom_dataid[g] >= 0:
-        k = int(m.geom_dataid[g])
-        v0, f0 = int(m.mesh_vertadr[k]), int(m.mesh_faceadr[k])
-        return rr.Mesh3D(
-            vertex_positions=m.mesh_vert[v0 : v0 + int(m.mesh_vertnum[k])],
-            triangle_indices=m.mesh_face[f0 : f0 + int(m.mesh_facenum[k])],
-            albedo_factor=color[0],
-        )
-    return None
 
 
 def _log_pose_set(
@@ -61,7 +31,8 @@ def _log_pose_set(
     commands: np.ndarray,
     poses: np.ndarray,
     group: str,
-    scale: float,
+    scale: float | None,
+    machine: str,
 ) -> None:
     from twin.kinematics import forward_batch, pose_to_frame
 
@@ -69,20 +40,22 @@ def _log_pose_set(
     local = mech.target_local()
     nominal = np.einsum("nij,tj->nti", pose_to_frame(poses)[0], local) + poses[:, None, :3]
     rec.log_poses(
-        timeline, range(len(commands)), mech, sol.qpos, nominal, sol.targets, group, scale
+        timeline, range(len(commands)), mech, sol.qpos, nominal, sol.targets, group, scale, machine
     )
 
 
 class MachineViews:
-    """The machine, its poses and its targets (a mixin of Recorder)."""
+    """The machine's views of a Recorder (a mixin of session.RecorderBase)."""
 
-    def _body_path(self, m: mujoco.MjModel, b: int) -> str:
-        name = _name(m, mujoco.mjtObj.mjOBJ_BODY, b, "body")
-        return f"world/bodies/{self.rr.escape_entity_path_part(name)}"
+    def _body_path(self, m: mujoco.MjModel, b: int, machine: str = "") -> str:
+        name = self.rr.escape_entity_path_part(_name(m, mujoco.mjtObj.mjOBJ_BODY, b, "body"))
+        return f"world/{entity_part(machine)}/bodies/{name}" if machine else f"world/bodies/{name}"
 
     @_active
-    def log_mechanism(self, mech: Mechanism) -> None:
-        """Every geom as a static shape under its body, placed by geom_pos/geom_quat."""
+    def log_mechanism(self, mech: Mechanism, machine: str = "") -> None:
+        """Every geom as a static shape under its body, placed by geom_pos/geom_quat; under
+        ``world/<machine>/bodies`` when a recording shows several machines (``machine``
+        names it in log_pose and log_targets too), else ``world/bodies``."""
         rr, m = self.rr, mech.model
         self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for g in range(m.ngeom):
@@ -93,10 +66,11 @@ class MachineViews:
             pose = rr.Transform3D(
                 translation=m.geom_pos[g], quaternion=rr.Quaternion(xyzw=_xyzw(m.geom_quat[g]))
             )
-            path = f"{self._body_path(m, int(m.geom_bodyid[g]))}/{geom}"
+            path = f"{self._body_path(m, int(m.geom_bodyid[g]), machine)}/{geom}"
             self._rec.log(path, pose, shape, static=True)
-        self.logged.mechanism = True
-        self._home = mech
+        if machine not in self.logged.machines:
+            self.logged.machines.append(machine)
+        self._home[machine] = mech
         d = mujoco.MjData(m)
         d.qpos[:] = mech.home_qpos
         mujoco.mj_kinematics(m, d)
@@ -104,26 +78,27 @@ class MachineViews:
         r = np.minimum(m.geom_rbound, 1.0)[shown, None]  # a sphere around each shown geom
         self.logged.machine_bounds.add(np.vstack([d.geom_xpos[shown] - r, d.geom_xpos[shown] + r]))
 
-    def _log_bodies(self, mech: Mechanism, qpos: np.ndarray, static: bool = False) -> None:
+    def _log_bodies(
+        self, mech: Mechanism, qpos: np.ndarray, machine: str = "", static: bool = False
+    ) -> None:
         rr, m, d = self.rr, mech.model, mech.data
         d.qpos[:] = qpos
         mujoco.mj_kinematics(m, d)
         self.logged.machine_bounds.add(d.xpos[1:])
         for b in range(1, m.nbody):
-            path = self._body_path(m, b)
             t = rr.Transform3D(
                 translation=d.xpos[b], quaternion=rr.Quaternion(xyzw=_xyzw(d.xquat[b]))
             )
-            self._rec.log(path, t, static=static)
-            if not static:
-                self._reference.setdefault(path, [t])
+            self._rec.log(self._body_path(m, b, machine), t, static=static)
 
     @_active
-    def log_pose(self, timeline: str, index: int, mech: Mechanism, qpos: np.ndarray) -> None:
+    def log_pose(
+        self, timeline: str, index: int, mech: Mechanism, qpos: np.ndarray, machine: str = ""
+    ) -> None:
         """One configuration: a world Transform3D per body (flat under world/bodies)."""
         self._time(timeline, index)
-        self._log_bodies(mech, qpos)
-        self.logged.pose_timelines.setdefault(timeline, set()).add(int(index))
+        self._log_bodies(mech, qpos, machine)
+        self.logged.poses.add(int(index))
 
     @_active
     def log_targets(
@@ -134,97 +109,11 @@ class MachineViews:
         measured: np.ndarray,
         scale: float = 100.0,
         group: str = "targets",
+        machine: str = "",
     ) -> None:
         """Nominal and measured targets (T, 3) in metres, and the error magnified ``scale``x,
-        under ``world/targets/<group>`` (one 3D view per group)."""
-        nominal = np.atleast_2d(np.asarray(nominal, dtype=float))
-        measured = np.atleast_2d(np.asarray(measured, dtype=float))
-        self._time(timeline, index)
-        root = f"world/targets/{entity_part(group)}"
-        for part, archetype in self._target_archetypes(nominal, measured, scale).items():
-            self._rec.log(f"{root}/{part}", archetype)
-            self._reference.setdefault(f"{root}/{part}", [archetype])
-        self._note_targets(timeline, [index], nominal, group)
-
-    def _target_archetypes(
-        self, nominal: np.ndarray, measured: np.ndarray, scale: float
-    ) -> dict[str, Any]:
-        """What log_targets logs of one pose, by entity below the group's."""
-        rr = self.rr
-        error_mm = np.linalg.norm(measured - nominal, axis=1) * 1e3
-        return {
-            "nominal": rr.Points3D(nominal, radii=TARGET_RADIUS, colors=[NOMINAL_COLOUR]),
-            "measured": rr.Points3D(measured, radii=TARGET_RADIUS, colors=[MEASURED_COLOUR]),
-            "error": rr.Arrows3D(
-                origins=nominal,
-                vectors=(measured - nominal) * scale,
-                radii=TARGET_RADIUS / 2,
-                labels=_error_labels(error_mm, scale),
-                show_labels=True,
-                colors=[ERROR_COLOUR],
-            ),
-        }
-
-    def _note_targets(
-        self, timeline: str, indices: Sequence[int], nominal: np.ndarray, group: str
-    ) -> None:
-        self.logged.machine_bounds.add(nominal.reshape(-1, 3))
-        self.logged.pose_timelines.setdefault(timeline, set()).update(int(k) for k in indices)
-        self.logged.target_groups.setdefault(entity_part(group), group)
-        self.logged.group_timelines.setdefault(entity_part(group), timeline)
-
-    @_active
-    def _log_targets_columns(
-        self,
-        timeline: str,
-        indices: list[int],
-        nominal: np.ndarray,
-        measured: np.ndarray,
-        scale: float,
-        group: str,
-    ) -> None:
-        """log_targets of every pose (P, T, 3) in one column per entity: each row the
-        same components as log_targets logs at that pose."""
-        rr = self.rr
-        n_poses, n_targets = nominal.shape[:2]
-        lengths = [n_targets] * n_poses
-        flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
-        error_mm = np.linalg.norm(flat_measured - flat_nominal, axis=1) * 1e3
-        times = [rr.TimeColumn(timeline, sequence=indices)]
-        root = f"world/targets/{entity_part(group)}"
-        columns = {
-            "nominal": [
-                *rr.Points3D.columns(positions=flat_nominal).partition(lengths),
-                *rr.Points3D.columns(
-                    radii=[TARGET_RADIUS] * n_poses, colors=[NOMINAL_COLOUR] * n_poses
-                ),
-            ],
-            "measured": [
-                *rr.Points3D.columns(positions=flat_measured).partition(lengths),
-                *rr.Points3D.columns(
-                    radii=[TARGET_RADIUS] * n_poses, colors=[MEASURED_COLOUR] * n_poses
-                ),
-            ],
-            "error": [
-                *rr.Arrows3D.columns(
-                    origins=flat_nominal,
-                    vectors=(flat_measured - flat_nominal) * scale,
-                    labels=_error_labels(error_mm, scale),
-                ).partition(lengths),
-                *rr.Arrows3D.columns(
-                    radii=[TARGET_RADIUS / 2] * n_poses,
-                    show_labels=[True] * n_poses,
-                    colors=[ERROR_COLOUR] * n_poses,
-                ),
-            ],
-        }
-        for part, cols in columns.items():
-            self._rec.send_columns(f"{root}/{part}", indexes=times, columns=cols)
-        if any(f"{root}/{part}" not in self._reference for part in columns):
-            first = self._target_archetypes(nominal[0], measured[0], scale)
-            for part, archetype in first.items():
-                self._reference.setdefault(f"{root}/{part}", [archetype])
-        self._note_targets(timeline, indices, nominal, group)
+        under ``world/targets/<group>`` (one 3D view per group, with ``machine``'s bodies)."""
+        self._log_targets(timeline, [int(index)], nominal, measured, scale, group, machine)
 
     @_active
     def log_poses(
@@ -236,35 +125,103 @@ class MachineViews:
         nominal: np.ndarray,
         measured: np.ndarray,
         group: str,
-        scale: float = 100.0,
+        scale: float | None = None,
+        machine: str = "",
     ) -> None:
-        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3).
+        """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3); the
+        error arrows magnified ``scale`` times (None: the 1-2-5 factor that draws the largest
+        error as a fifth of the targets' spread, targets.arrow_scale).
 
         The bodies' transforms and the targets of all poses go out as one column per entity
-        (what :meth:`log_pose` and :meth:`log_targets` log pose by pose, in one call per
-        entity instead of one per entity and pose)."""
+        (what :meth:`log_pose` and :meth:`log_targets` log pose by pose)."""
         indices = [int(k) for k in indices]
         qpos = np.atleast_2d(np.asarray(qpos, dtype=float))
         nominal, measured = np.asarray(nominal, dtype=float), np.asarray(measured, dtype=float)
-        shape = (len(indices), nominal.shape[1] if nominal.ndim == 3 else 0, 3)
-        if (
-            self._rec is not None
-            and len(indices) == len(qpos) > 0
-            and nominal.shape == measured.shape == shape
-            and shape[1] > 0
-        ):
-            self._log_bodies_columns(timeline, indices, mech, qpos)
-            self._log_targets_columns(timeline, indices, nominal, measured, scale, group)
-            return
-        for k, q, a, b in zip(indices, qpos, nominal, measured, strict=True):
-            self.log_pose(timeline, k, mech, q)
-            self.log_targets(timeline, k, a, b, scale=scale, group=group)
+        if nominal.ndim == 2:
+            nominal, measured = nominal[:, None], measured[:, None]
+        if not (len(indices) == len(qpos) == len(nominal) and nominal.shape == measured.shape):
+            raise ValueError(
+                f"{group}: {len(indices)} indices, {len(qpos)} configurations, targets "
+                f"{nominal.shape} and {measured.shape}: one of each per pose"
+            )
+        scale = arrow_scale(nominal, measured) if scale is None else float(scale)
+        self._log_bodies_columns(timeline, indices, mech, qpos, machine)
+        self._log_targets(timeline, indices, nominal, measured, scale, group, machine)
+
+    def _log_targets(
+        self,
+        timeline: str,
+        indices: list[int],
+        nominal: np.ndarray,
+        measured: np.ndarray,
+        scale: float,
+        group: str,
+        machine: str,
+    ) -> None:
+        """The targets of every pose (P, T, 3) in one column per entity."""
+        rr = self.rr
+        nominal = np.asarray(nominal, dtype=float).reshape(len(indices), -1, 3)
+        measured = np.asarray(measured, dtype=float).reshape(nominal.shape)
+        self.logged.use_timeline(timeline)
+        n_poses, n_targets = nominal.shape[:2]
+        lengths = [n_targets] * n_poses
+        flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
+        span = spread(nominal)
+        point_radius, arrow_radius = radii(span)
+        labels_at = label_positions(nominal, span).reshape(-1, 3)
+        times = [rr.TimeColumn(timeline, sequence=indices)]
+        part = entity_part(group)
+        root = f"world/targets/{part}"
+
+        def points(positions: np.ndarray, colour: list[int], radius: float) -> list[Any]:
+            return [
+                *rr.Points3D.columns(positions=positions).partition(lengths),
+                *rr.Points3D.columns(radii=[radius] * n_poses, colors=[colour] * n_poses),
+            ]
+
+        columns = {
+            "nominal": points(flat_nominal, NOMINAL_COLOUR, point_radius),
+            "measured": points(flat_measured, MEASURED_COLOUR, point_radius),
+            "error": [
+                *rr.Arrows3D.columns(
+                    origins=flat_nominal, vectors=(flat_measured - flat_nominal) * scale
+                ).partition(lengths),
+                *rr.Arrows3D.columns(
+                    radii=[arrow_radius] * n_poses, colors=[ERROR_COLOUR] * n_poses
+                ),
+            ],
+            "error_mm": [
+                *rr.Points3D.columns(
+                    positions=labels_at, labels=error_labels(flat_nominal, flat_measured)
+                ).partition(lengths),
+                *rr.Points3D.columns(
+                    radii=[point_radius / 3] * n_poses,
+                    colors=[ERROR_COLOUR] * n_poses,
+                    show_labels=[True] * n_poses,
+                ),
+            ],
+        }
+        for name, cols in columns.items():
+            self._rec.send_columns(f"{root}/{name}", indexes=times, columns=cols)
+        self.logged.machine_bounds.add(flat_nominal)
+        self.logged.poses.update(indices)
+        entry = self.logged.target_groups.setdefault(
+            part, TargetGroup(f"{group}: errors x{scale:g}", machine)
+        )
+        entry.bounds.add(flat_nominal)
+        entry.bounds.add(labels_at)
 
     @_active
     def _log_bodies_columns(
-        self, timeline: str, indices: list[int], mech: Mechanism, qpos: np.ndarray
+        self,
+        timeline: str,
+        indices: list[int],
+        mech: Mechanism,
+        qpos: np.ndarray,
+        machine: str = "",
     ) -> None:
         rr, m, d = self.rr, mech.model, mech.data
+        self.logged.use_timeline(timeline)
         xpos = np.empty((len(qpos), m.nbody, 3))
         xquat = np.empty((len(qpos), m.nbody, 4))
         for i, q in enumerate(qpos):
@@ -275,19 +232,12 @@ class MachineViews:
         xyzw = xquat[:, :, [1, 2, 3, 0]]
         times = [rr.TimeColumn(timeline, sequence=indices)]
         for b in range(1, m.nbody):
-            path = self._body_path(m, b)
             self._rec.send_columns(
-                path,
+                self._body_path(m, b, machine),
                 indexes=times,
                 columns=rr.Transform3D.columns(translation=xpos[:, b], quaternion=xyzw[:, b]),
             )
-            if path not in self._reference:
-                self._reference[path] = [
-                    rr.Transform3D(
-                        translation=xpos[0, b], quaternion=rr.Quaternion(xyzw=xyzw[0, b])
-                    )
-                ]
-        self.logged.pose_timelines.setdefault(timeline, set()).update(indices)
+        self.logged.poses.update(indices)
 
     def log_pose_set(
         self,
@@ -296,9 +246,10 @@ class MachineViews:
         commands: np.ndarray,
         poses: np.ndarray,
         group: str,
-        scale: float = 100.0,
+        scale: float | None = None,
+        machine: str = "",
     ) -> None:
         """The machine ``mech`` driven by ``commands`` (N, A) at pose k of ``timeline``, its
         targets against those of the commanded ``poses`` (N, 6) and the error arrows."""
         if self._rec is not None:
-            _log_pose_set(self, timeline, mech, commands, np.asarray(poses), group, scale)
+            _log_pose_set(self, timeline, mech, commands, np.asarray(poses), group, scale, machine)

@@ -1,5 +1,6 @@
 """A recording's life: the rerun stream made (or nothing, cheaply, without path and viewer),
-its time set per call, and on close the series styles, the blueprint and the atomic write."""
+one timeline at most (rerun's wall-clock timelines off), its time set per call, and on close the
+series styles, a machine never posed at its home pose, the blueprint and the atomic write."""
 
 from __future__ import annotations
 
@@ -10,20 +11,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from common.atomic_files import write_bytes_atomic
 from scenarios.recording.blueprints import Logged, build_blueprint
 from twin.mechanism import Mechanism
 
 FLUSH_TIMEOUT_S = 120.0  # encoding a recording of a few MB takes well under a second
-
-
 PALETTE = [(220, 60, 50), (40, 110, 220), (40, 160, 80), (150, 80, 200), (230, 150, 30)]
-
-
-def _error_labels(error_mm: np.ndarray, scale: float) -> list[str]:
-    return [f"{e:.3f} mm (arrow x{scale:g})" for e in error_mm]
 
 
 def entity_part(name: str) -> str:
@@ -54,8 +47,7 @@ class RecorderBase:
         self._rec: Any = None
         self._stream: Any = None
         self._want_blueprint = False
-        self._home: Mechanism | None = None
-        self._reference: dict[str, list[Any]] = {}  # entity -> its first pose's archetypes
+        self._home: dict[str, Mechanism] = {}  # machine -> its nominal mechanism
         if not self.enabled:
             return
         import rerun as rr
@@ -64,6 +56,10 @@ class RecorderBase:
         self.rr = rr
         self._strict = default_strict_mode()  # RERUN_STRICT as it is now, not at import
         self._rec = rr.RecordingStream(app_id)
+        # the study's timeline only: a wall-clock timeline would be a face of the recording
+        # where the views of data sent as columns (the poses) are empty
+        self._rec.set_log_time_enabled(False)
+        self._rec.set_log_tick_enabled(False)
         if self.path is not None and spawn_viewer:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path)
@@ -101,6 +97,7 @@ class RecorderBase:
         return catch_and_log_exceptions("Recorder", strict=True)
 
     def _time(self, timeline: str, index: int) -> None:
+        self.logged.use_timeline(timeline)
         self._rec.reset_time()
         self._rec.set_time(timeline, sequence=int(index))
 
@@ -123,14 +120,8 @@ class RecorderBase:
                 else rr.SeriesLines(names=[name], colors=color, widths=[2.0])
             )
             self._rec.log(path, style, static=True)
-        if self._home is not None and not log.pose_timelines:  # no pose: show the home pose
-            self._log_bodies(self._home, self._home.home_qpos, static=True)
-        active = log.active_timeline()
-        if active is not None and active not in log.pose_timelines and self._reference:
-            self._time(
-                active, min(next(s.indices for s in log.series.values() if s.timeline == active))
-            )
-            for path, archetypes in self._reference.items():  # the first pose on this timeline too
-                self._rec.log(path, *archetypes)
+        for machine, mech in self._home.items():
+            if not log.poses:  # never posed: the home pose, on any timeline
+                self._log_bodies(mech, mech.home_qpos, machine, static=True)
         if self._want_blueprint:
             self._rec.send_blueprint(build_blueprint(log))

@@ -77,7 +77,7 @@ class RayEngine:
                 )
         except Exception as exc:
             where = os.environ.get("RAY_ADDRESS") or "a local instance"
-            raise EngineError(f"ray could not start ({where}): {exc}") from exc
+            raise EngineError(f"ray could not start ({where}): {exc}{_auth_hint(exc)}") from exc
         self._started = True
 
     @property
@@ -107,6 +107,18 @@ class RayEngine:
         if self._started:
             self._ray.shutdown()
             self._started = False
+
+
+def _auth_hint(exc: Exception) -> str:
+    """What to do when a cluster asks for its token (Ray's own message says where it looks)."""
+    text = f"{type(exc).__name__} {exc}"
+    if "Authentication" not in text and "AuthToken" not in text:
+        return ""
+    return (
+        "\n  the cluster uses token authentication: run with RAY_AUTH_MODE=token and the "
+        "head's token (its ~/.ray/auth_token copied to this machine, RAY_AUTH_TOKEN_PATH or "
+        "RAY_AUTH_TOKEN); see the README, 'Sweeps on a cluster'"
+    )
 
 
 def make_engine(name: str, num_cpus: int | None = None) -> LocalEngine | RayEngine:

@@ -116,8 +116,10 @@ def sweep(
         bar.message(f"resuming: {len(results)} of {len(specs)} runs already done")
     n_failed = 0
     bar.update(len(results), n_failed)
+    where: dict[str, Any] | None = None
     if todo:
         eng = make_engine(engine, num_cpus)
+        where = getattr(eng, "cluster", None)  # Ray: the address joined (None: a local one)
         args = [
             (path, s.overrides, s.run_id, str(out), s.truth_seed, records[s.run_id]) for s in todo
         ]
@@ -151,6 +153,8 @@ def sweep(
 
     ordered = [{**results[s.run_id], "spec": records[s.run_id]} for s in specs]
     summary = aggregate(scenario.name, engine, swept, ordered)
+    if where is not None:
+        summary["ray"] = where  # {"address": RAY_ADDRESS or None, "cpus": the cluster's}
     with staged(out) as stage:  # the aggregate's files go in together, or none of them
         figures = distribution_pngs(stage, scenario.name, ordered)
         summary["figures"] = figures

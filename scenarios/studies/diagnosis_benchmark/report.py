@@ -9,6 +9,11 @@ def _pct(v: float | None) -> str:
     return "n/a" if v is None else f"{100 * v:.0f} %"
 
 
+def _figure(s: dict[str, Any], name: str, alt: str) -> list[str]:
+    file = (s.get("figures") or {}).get(name)
+    return [f"![{alt}]({file})", ""] if file else []
+
+
 def confusion_table(confusion: dict[str, dict[str, int]]) -> list[str]:
     """Markdown rows: true kind (rows) -> named effect (columns), counts."""
     named = sorted({n for row in confusion.values() for n in row})
@@ -64,10 +69,12 @@ def report(s: dict[str, Any]) -> str:
         "",
         "## Confusion (true kind -> named)",
         "",
+        *_figure(s, "confusion", "true effect x named effect, counts"),
         *confusion_table(s["confusion"]),
         "",
         "## Right names by magnitude (all kinds but none)",
         "",
+        *_figure(s, "rate_by_size", "right names by effect size"),
         "| multiplier (x noise) | cases (not absorbed) | right | absorbed |",
         "|---|---|---|---|",
         *[

@@ -55,6 +55,7 @@ from scenarios.studies.diagnosis_benchmark.aggregate import (
     WORSE_FACTOR,
     aggregate,
 )
+from scenarios.studies.diagnosis_benchmark.figures import write_figures
 from scenarios.studies.diagnosis_benchmark.kinds import (
     ACCEPTED,
     EFFECT_TYPES,
@@ -385,7 +386,11 @@ def run(
         "scaled_argument": {k: v[0] for k, v in SCALED.items()},
         "skipped": skipped,
         "cases": results,
-        "runtime_s": time.perf_counter() - t0,
     }
+    summary["figures"] = write_figures(out_dir, summary, STRONG_MULTIPLIER)
+    titles = {"confusion": "true x named effect", "rate_by_size": "right names by size"}
+    for name, file in summary["figures"].items():
+        recorder.log_figure(name, out_dir / file, titles[name])
+    summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report(scenario.study, summary)
     return summary

@@ -82,6 +82,8 @@ class Case:
             worst_parameter=r.names[worst],
             worst_std_error_mm=float(std[worst]),
             max_abs_over_std=float(np.nanmax(z)) if np.any(np.isfinite(z)) else None,
+            worst_over_std=float(z[worst]) if np.isfinite(z[worst]) else None,
+            n_estimated=int(np.sum(r.estimated)),
             strongest_correlations=strongest_correlations(r, 3),
             rms_abs_mm=float(np.sqrt(np.mean(dev[r.estimated] ** 2))),
             n_identifiable=r.report.n_identifiable,
@@ -134,6 +136,36 @@ def _identify_case(
     return Case(
         name, len(poses), noise, res, "", float(np.max(np.abs(dev))), time.perf_counter() - t0
     )
+
+
+def truth_source(scenario: Scenario) -> dict[str, Any]:
+    """Where the truth came from: a values file (its path as the scenario names it) or a
+    seeded draw from [truth.random] (the seed and the draw's settings)."""
+    values_file = scenario.get("truth.values_file", str, None)
+    if values_file is not None:
+        return {"kind": "values_file", "file": values_file}
+    return {
+        "kind": "random",
+        "seed": scenario.get("seed", int),
+        "random": scenario.section("truth").get("random"),
+    }
+
+
+def lm_cost_png(cases: list[Any]) -> bytes:
+    """The Levenberg-Marquardt cost of each case against its iterations (log axis)."""
+    from scenarios.figures import plt, png_bytes
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for case in cases:
+        if case.result is not None and case.result.history:
+            cost = np.asarray(case.result.history, dtype=float)
+            ax.semilogy(np.arange(len(cost)), np.maximum(cost, 1e-300), "o-", ms=3, label=case.name)
+    ax.set_xlabel("Levenberg-Marquardt iteration")
+    ax.set_ylabel("cost: half the sum of squared residuals (m^2, log)")
+    ax.set_title("hexapod: identification cost by iteration", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return png_bytes(fig)
 
 
 def export_check(
@@ -230,11 +262,17 @@ def run(
         sol = forward_batch(truth, commands[ok])  # the true pose, no tracker noise
         errs = pose_errors(v_poses[ok], sol.targets, local)
         recorder.log_error_map(stage, "verification_grid", v_poses[ok, :3], errs.position * 1e3)
-        for k, i in enumerate(np.flatnonzero(ok)[::8]):  # one orientation per node
-            recorder.log_pose("verification_node", k, truth, sol.qpos[8 * k])
-            recorder.log_targets(
-                "verification_node", k, nominal_targets[i], sol.targets[8 * k], group=stage
-            )
+        first = np.flatnonzero(ok)[::v_orient]  # one orientation per node
+        at = np.searchsorted(np.flatnonzero(ok), first)  # its row in sol
+        recorder.log_poses(
+            "verification_node",
+            range(len(first)),
+            truth,
+            sol.qpos[at],
+            nominal_targets[first],
+            sol.targets[at],
+            stage,
+        )
         stats = error_stats(errs).as_dict()
         stats["n_unreachable_after_compensation"] = int(np.sum(~ok))
         return stats
@@ -269,6 +307,7 @@ def run(
     summary: dict[str, Any] = {
         "scenario": scenario.name,
         "model": nominal.name,
+        "truth_source": truth_source(scenario),
         "n_parameters": len(params),
         "n_identifiable": main.report.n_identifiable if main else None,
         "recovery_noise_free_max_abs_mm": by_name["noise_free"].max_abs_mm,
@@ -279,10 +318,10 @@ def run(
         "cases": {c.name: c.summary(truth_display, params) for c in cases},
         "paper": PAPER,
     }
+    if recorder.enabled:
+        recorder.log_figure("lm_cost", lm_cost_png(cases), "LM cost by iteration")
     for case in cases:
         if case.result is not None:
-            for k, cost in enumerate(case.result.history):
-                recorder.log_metric(f"log10_lm_cost/{case.name}", "lm_iteration", k, np.log10(cost))
             recorder.log_parameters(
                 case.name,
                 params.names,

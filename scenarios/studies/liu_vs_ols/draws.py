@@ -175,6 +175,8 @@ def run_draws(
     from scenarios.studies.liu_vs_ols.draws_figures import draws_figure
 
     summary["figures"] = draws_figure(out_dir, results, [lab for lab in labels if lab != "ols"])
+    for name, file in summary["figures"].items():  # the distribution, beside the report
+        recorder.log_figure(name, out_dir / file, "estimator minus OLS over the draws")
     summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report(scenario.study, summary)
     return summary

@@ -47,6 +47,7 @@ from scenarios.studies.liu_vs_ols.pipeline import (
     stage_commands,
     with_control,
 )
+from scenarios.studies.liu_vs_ols.recording import record
 from scenarios.studies.liu_vs_ols.sentences import estimator_parameters
 from twin.kinematics import one_blas_thread
 from twin.parameters import KINDS, ParameterSet
@@ -125,7 +126,7 @@ def run(
         return run_draws(scenario, out_dir, progress, recorder)
     t_start = time.perf_counter()
     bench = make_bench(scenario)
-    nominal, params, truth = bench.machine.nominal, bench.machine.params, bench.machine.truth
+    nominal, params = bench.machine.nominal, bench.machine.params
     cal = calibrate(bench, scenario.get("fine.estimators", list), progress)
     problem, estimates = cal.problem, cal.estimates
     for m, (est, _) in estimates.items():
@@ -161,29 +162,17 @@ def run(
         layers, maps = score(bench, poses, cmds)  # every stage from the same clock
 
     maps = {g: {k: v for k, v in st.items() if k != CONTROL} for g, st in maps.items()}
-    recorder.log_mechanism(nominal)
-    test_poses = poses["test"]
-    for stage in ("coarse", "ols", "liu"):
-        if stage in cmds["test"]:
-            recorder.log_pose_set(
-                "test_node", truth, cmds["test"][stage], test_poses, f"test layer, {stage}"
-            )
-    for group, stages in maps.items():
-        for stage, (p, errs) in stages.items():
-            vmax = float(np.max(errs.position)) * 1e3  # each stage on its own colour scale
-            recorder.log_error_map(stage, group, p[:, :3], errs.position * 1e3, vmax)
     kept_names = [params.names[k] for k in problem.columns]
     shown = display_scale(params, problem.columns)
-    for label, (est, _) in estimates.items():
-        recorder.log_parameters(label, kept_names, est.x * shown, est.std_errors * shown)
-    # bars, not a curve: a curve on its own timeline left the machine views empty when the
-    # viewer opened on it, and two or three points make no curve
-    changes = cal.coarse.relative_changes
-    recorder.log_bars(
-        "coarse_relative_change",
-        [f"round {k + 1}" for k in range(len(changes))],
-        changes,
-        "relative",
+    record(
+        recorder,
+        nominal,
+        maps,
+        estimates,
+        kept_names,
+        shown,
+        cal.coarse.relative_changes,
+        loop,
     )
 
     progress.step("Monte Carlo of the fine estimate (Eqs. 17-18)")
@@ -267,6 +256,8 @@ def run(
     summary["figures"] = {}
     if figures:
         summary["figures"] = _write_figures(out_dir, maps, estimates, kept_names, shown)
+        maps_png = out_dir / summary["figures"]["error_maps_position"]
+        recorder.log_figure("error_maps", maps_png, "error maps: every stage, every layer")
     summary["runtime_s"] = time.perf_counter() - t_start
     recorder.log_report(scenario.study, summary)
     return summary

@@ -140,4 +140,13 @@ def run(
         }
     summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report("measured_loop", summary)
+    figures = {  # the commands' own figures, as a user gets them beside their files
+        "diagnosis": "diagnose: the residual against what explains it",
+        "verify": "verify: geometry only, test set",
+        "verify_with_effect": "verify: geometry and effect, test set",
+    }
+    for stem, title in figures.items():
+        png = out_dir / f"{stem}.png"
+        if png.is_file():
+            recorder.log_figure(stem, png, title)
     return summary

@@ -116,8 +116,6 @@ def run(
     optimal = best.indices[:n_opt]
     progress.note(f"index stops improving at {n_opt} poses")
 
-    for k, v in enumerate(best.index_by_count):
-        recorder.log_metric(f"{index}_by_count", "pose_count", best.start_count + k, v)
     recorder.log_mechanism(nominal)
     for i, q in enumerate(forward_batch(nominal, b_cmds[optimal]).qpos):
         recorder.log_pose("optimal_pose", i, nominal, q)
@@ -201,7 +199,11 @@ def run(
             "best start": best.index_by_count,
             **{f"start {k}": r.index_by_count for k, r in enumerate(runs[:5])},
         },
-        f"{index} (column-scaled)",
+        f"{index} (column-scaled, log)",
+        stop=n_opt,
+    )
+    recorder.log_figure(
+        "index_vs_count", out_dir / "index_vs_count.png", f"{index} index by pose count"
     )
     summary = {
         "scenario": scenario.name,

@@ -145,8 +145,6 @@ def run(
     recorder.log_mechanism(nominal)
     for i, q in enumerate(pred.qpos):
         recorder.log_pose("node", i, nominal, q)
-    for k, lam in enumerate(spectral.eigenvalues):
-        recorder.log_metric("scaled_singular_values", "rank_index", k, float(np.sqrt(lam)))
     recorder.log_text("identifiable", "\n".join(f"* {n}" for n in kept_names), "identifiable set")
 
     from scenarios.studies.polisher_identifiability.figures import null_space_png, spectrum_png
@@ -162,6 +160,9 @@ def run(
         list(params.names),
         "which source errors the plan cannot see (share in the null space of H)",
     )
+    # the report's figures, static: the singular values on their log axis, where the rank is
+    recorder.log_figure("singular_values", out_dir / "singular_values.png", "singular values of H")
+    recorder.log_figure("null_space", out_dir / "null_space.png", "what the plan cannot see")
     # a wrist angle or node outside the plan raises before this point (WorkspaceError)
     summary = {
         "scenario": scenario.name,

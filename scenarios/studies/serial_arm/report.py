@@ -4,20 +4,44 @@ from __future__ import annotations
 
 from typing import Any
 
+ROWS = (  # (what, unit, value of a variant's summary): the table is read down a column
+    ("reflectors (targets)", "", lambda v: f"{v['n_targets']}"),
+    ("identifiable parameters", "", lambda v: f"{v['n_identifiable']} of {v['n_parameters']}"),
+    ("calibration residual RMS", "mm", lambda v: f"{v['calibration']['rms_mm']:.4f}"),
+    (
+        "test before: RMS / max",
+        "mm",
+        lambda v: f"{v['test']['before']['rms_mm']:.3f} / {v['test']['before']['max_mm']:.3f}",
+    ),
+    (
+        "test after: RMS / max",
+        "mm",
+        lambda v: f"{v['test']['after']['rms_mm']:.4f} / {v['test']['after']['max_mm']:.4f}",
+    ),
+    ("test orientation RMS before -> after", "deg", lambda v: _orientation(v)),
+    ("registration error", "mm", lambda v: f"{v['registration_error_mm']:.3f}"),
+    (
+        "exit codes (identify, verify)",
+        "",
+        lambda v: "{identify}, {verify}".format(**v["exit_codes"]),
+    ),
+)
 
-def _row(name: str, v: dict[str, Any]) -> list[str]:
+
+def _orientation(v: dict[str, Any]) -> str:
     b, a = v["test"]["before"], v["test"]["after"]
-    ori = ""
-    if "orientation" in a:
-        ori = f" {b['orientation']['rms_deg']:.4f} -> {a['orientation']['rms_deg']:.4f} deg RMS |"
-    else:
-        ori = " - |"
-    return [
-        f"| {name} | {v['n_targets']} | {v['n_identifiable']} of {v['n_parameters']} | "
-        f"{v['calibration']['rms_mm']:.4f} | {b['rms_mm']:.3f} / {b['max_mm']:.3f} | "
-        f"{a['rms_mm']:.4f} / {a['max_mm']:.4f} |{ori} {v['registration_error_mm']:.3f} | "
-        f"{v['exit_codes']['identify']}, {v['exit_codes']['verify']} |"
-    ]
+    if "orientation" not in a:
+        return "- (one reflector)"
+    return f"{b['orientation']['rms_deg']:.4f} -> {a['orientation']['rms_deg']:.4f}"
+
+
+def _table(one: dict[str, Any], three: dict[str, Any]) -> list[str]:
+    """One row per quantity, one column per variant: narrow enough for a text view."""
+    lines = ["| | one reflector | three reflectors |", "|---|---|---|"]
+    for what, unit, value in ROWS:
+        label = f"{what} ({unit})" if unit else what
+        lines.append(f"| {label} | {value(one)} | {value(three)} |")
+    return lines
 
 
 def _loop_row(name: str, v: dict[str, Any]) -> str:
@@ -91,12 +115,7 @@ def report(s: dict[str, Any]) -> str:
         f"over the readings. The tracker noise alone gives a 3D RMS of "
         f"{s['noise_floor_3d_mm']:.4f} mm.",
         "",
-        "| reflectors | targets | identifiable | calibration residual RMS (mm) | "
-        "test before RMS / max (mm) | test after RMS / max (mm) | test orientation | "
-        "registration error (mm) | exit codes |",
-        "|---|---|---|---|---|---|---|---|---|",
-        *_row("one", s),
-        *_row("three", three),
+        *_table(s, three),
         "",
         f"Redundant with the tracker registration (kept at 0): "
         f"{', '.join(s['redundant_with_registration']) or 'none'}. The other unidentifiable "

@@ -72,6 +72,9 @@ def _registration_error_mm(estimated: Registration, tracker: Tracker, readings: 
     return float(np.sqrt(np.mean(np.sum((est_base - true_base) ** 2, axis=1))) * 1e3)
 
 
+POSE_TIMELINE = "pose"  # the pose number in the dataset, both variants
+
+
 def _variant(
     scenario: Scenario,
     name: str,
@@ -140,17 +143,20 @@ def _variant(
     readings = read_dataset(data).readings.mean(axis=2)
     calibrated = nominal.with_model(params.inject(nominal.model, loaded.values_for(params)))
     fk = forward_batch(calibrated, commands)
-    recorder.log_mechanism(nominal)
-    for k in range(0, len(commands), max(1, len(commands) // 20)):
-        recorder.log_pose(f"{name}_pose", k, calibrated, fk.qpos[k])
-        recorder.log_targets(
-            f"{name}_pose",
-            k,
-            fk.targets[k],
-            loaded.registration.to_base(readings[k]),
-            scale=200.0,
-            group=name,
-        )
+    # both variants on one timeline (a second would be a face where the other's view is
+    # empty), each arm under its own name; the reflectors' error magnified to be seen
+    recorder.log_mechanism(nominal, machine=name)
+    shown = np.arange(0, len(commands), max(1, len(commands) // 20))
+    recorder.log_poses(
+        POSE_TIMELINE,
+        shown,
+        calibrated,
+        fk.qpos[shown],
+        fk.targets[shown],
+        np.array([loaded.registration.to_base(readings[k]) for k in shown]),
+        name.replace("_", " "),
+        machine=name,
+    )
     progress.step(f"{name}: compensate, re-measure, export, verify the exported model")
     loop = close_the_loop(
         scenario,

@@ -9,7 +9,8 @@ def report(s: dict[str, Any]) -> str:
     lines = [
         "# Closing the loop: a residual that geometry leaves",
         "",
-        f"Effects in the truth (not declared to the calibration): {s['effects_in_truth']}.",
+        "Effects in the truth (not declared to the calibration): "
+        f"{', '.join(s['effects_in_truth']) or 'none'}.",
         "",
         f"Residual after geometric calibration: {s['residual_rms_before_mm']:.4f} mm RMS per "
         f"coordinate, against a tracker noise floor of {s['noise_floor_rms_mm']:.4f} mm "

@@ -19,6 +19,7 @@ from calib.analysis import max_mean_stats, pose_errors_between
 from calib.diagnosis import diagnose, effect_offsets, effect_target_shifts, save_diagnosis_png
 from calib.fit import CalibrationModel, bind_dataset, identify
 from scenarios.config import Scenario
+from scenarios.loop_figures import effect_plots
 from scenarios.machine_setup import build_effects, load_machine
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
@@ -92,11 +93,14 @@ def run(
     local = nominal.target_local()
     timing = dict(time_origin=diag.time_origin, time_unit=diag.time_unit)
 
-    def with_effects(commands: np.ndarray, order: np.ndarray) -> np.ndarray:
-        """Targets predicted with the named effects: actuator offsets through the kinematics,
-        the effects on the readings (geometry beyond the error model, thermal expansion,
-        tracker drift and scale) as the diagnosis fitted them."""
-        coef = diag.coefficients
+    def with_effects(
+        commands: np.ndarray, order: np.ndarray, coef: dict[str, np.ndarray] | None = None
+    ) -> np.ndarray:
+        """Targets predicted with the named effects (``coef``, default all of them): actuator
+        offsets through the kinematics, the effects on the readings (geometry beyond the
+        error model, thermal expansion, tracker drift and scale) as the diagnosis fitted
+        them."""
+        coef = diag.coefficients if coef is None else coef
         shift = effect_offsets(model, after_values, commands, order, coef, **timing)
         pred = forward_batch(model.mechanism(after_values), commands + shift, check_stroke=False)
         return pred.targets + effect_target_shifts(
@@ -118,15 +122,19 @@ def run(
     recorder.log_loop(
         nominal, cal_ds.order, model.predict(result.values, cal.commands), cal.measured, cal_after
     )
-    # one candidate far off (a bad fit held out) would flatten every other bar on a linear
-    # scale: each bar is log2 of its held-out RMS over the noise (0: at the noise, 1: twice it)
-    ratio = {n: sc.heldout_rms_mm / diag.noise_floor_rms_mm for n, sc in diag.scores.items()}
-    recorder.log_bars(
-        "held-out_RMS_over_noise",
-        list(ratio),
-        [float(np.log2(v)) if v > 0 else float("nan") for v in ratio.values()],
-        "log2 of held-out RMS / noise per coordinate",
-    )
+    if recorder.enabled:  # the cause: one view per named effect, against its variable
+        cal_order = np.asarray(cal_ds.order)
+        plots = effect_plots(
+            model,
+            after_values,
+            cal.commands,
+            cal_order,
+            cal.measured,
+            diag.coefficients,
+            lambda coef: with_effects(cal.commands, cal_order, coef),
+            **timing,
+        )
+        recorder.log_causes(diag, figure and out_dir / figure, plots, sigma * 1e3)
     recorder.log_verdict(diag, rms_before * 1e3, rms_after * 1e3, sigma * 1e3)
     summary = {
         "scenario": scenario.name,
