@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[dev]"
-	$(PY) -m twin.kinematics_compiled  # compile the kinematics kernels into numba's cache
+	$(PY) -m twin.kinematics.warm_up  # compile the kinematics kernels into numba's cache
 	touch $(STAMP)
 
 # The tests on every core (pytest-xdist; WORKERS=0: in this process), a module whole on one

@@ -1,9 +1,10 @@
 """Speed benchmark (``make bench``): results/bench.json and results/bench.md.
 
 * forward kinematics of the hexapod, the polisher and the serial arm: single pose and batched
-  (twin.kinematics_batch.forward_batch, 10,000 poses, best of 5, on the compiled kernels and
+  (twin.kinematics.batch.forward_batch, 10,000 poses, best of 5, on the compiled kernels and
   on the numpy path alternately), poses per second (bench.fk);
-* identification on each machine (bench.machines): ours (calib.identify, robust by default and
+* identification on each machine (bench.machines): ours (calib.fit.identification, robust by
+default and
   plain least squares) against scipy.optimize.least_squares with a finite-difference Jacobian
   on a fresh model over the same free parameters with tolerances as tight as ours, best of N,
   both answers compared (bench.identification);
@@ -27,8 +28,8 @@ from bench.identification import SCIPY_OPTIONS, compare
 from bench.machines import MACHINES
 from bench.report import bench_markdown
 from bench.scenario_times import scenario_times
-from calib.atomic_files import json_text
-from calib.write_set import write_files
+from common.atomic_files import json_text
+from common.write_set import write_files
 from scenarios.config import REPO_ROOT
 
 TARGETS = {

@@ -1,5 +1,5 @@
-"""Forward kinematics rates: single pose (twin.kinematics.forward) and batched
-(twin.kinematics_batch.forward_batch, 10,000 poses, best of 5): the compiled kernels (the
+"""Forward kinematics rates: single pose (twin.kinematics.single_pose.forward) and batched
+(twin.kinematics.batch.forward_batch, 10,000 poses, best of 5): the compiled kernels (the
 default) and the numpy path, timed alternately in the same run so that their ratio holds on a
 loaded machine."""
 
@@ -9,8 +9,8 @@ import time
 
 import numpy as np
 
-from twin.kinematics import forward
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 
 

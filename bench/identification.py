@@ -1,10 +1,12 @@
-"""Identification: ours (calib.identify, robust and plain) against scipy's least_squares with
+"""Identification: ours (calib.fit.identification, robust and plain) against scipy's least_squares
+with
 a finite-difference Jacobian, each on a fresh CalibrationModel, best of N, answers compared.
 
 The baseline is what a user would write first: ``least_squares(method="lm", jac="2-point",
 x_scale="jac")`` over the same free (identifiable) parameters, from the same start (zero),
 with tolerances as tight as ours (our LM stops on a step below 1e-12 SI or a relative cost
-decrease below 1e-14). Both run with BLAS on one thread (ours pins it inside calib.identify,
+decrease below 1e-14). Both run with BLAS on one thread (ours pins it inside
+calib.fit.identification,
 the baseline here), so neither pays for thread hand-offs on small matrices.
 """
 
@@ -16,9 +18,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from bench.machines import BenchMachine
-from calib.identify import identify
-from calib.model import CalibrationModel
-from twin.kinematics_fast import one_blas_thread
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from twin.kinematics.structure import one_blas_thread
 
 SCIPY_OPTIONS = {"method": "lm", "jac": "2-point", "x_scale": "jac", "ftol": 1e-14, "xtol": 1e-12}
 

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.identify import Observations
+from calib.fit.observations import Observations
 from scenarios.config import REPO_ROOT
 from scenarios.truth_draw import TruthSpec, draw_truth
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import ParameterSet
 from twin.tracker import PoseNoise, Tracker, TrackerNoise
 from twin.workspace import commands_for_poses, layer_poses, random_poses

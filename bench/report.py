@@ -58,7 +58,7 @@ def bench_markdown(out: dict) -> str:
         "",
         "## Machines",
         "",
-        "Ours: calib.identify (robust, the default; `plain` is robust=False), fresh model, best "
+        "Ours: calib.fit.identification (robust, the default; `plain` is robust=False), fresh model, best "  # noqa: E501
         f"of {machines[names[0]].get('identify_ours_repeats')}. Baseline: "
         f"`scipy.optimize.least_squares({out['scipy_options']})` over the same identified "
         "parameters on a fresh model, best of `identify_scipy_fd_runs`. Differences in mm "

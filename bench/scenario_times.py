@@ -1,5 +1,5 @@
-"""Wall time of every scenario (scenarios/*.toml) run whole through scenarios.runner into a
-temporary results root, never results/. The slow studies (optimal_poses, every
+"""Wall time of every scenario (scenarios/studies/*/*.toml) run whole through scenarios.runner
+into a temporary results root, never results/. The slow studies (optimal_poses, every
 diagnosis_benchmark*, the 100-draw liu_vs_ols_draws, the liu_regime map; minutes to tens of
 minutes each) only with BENCH_ALL=1.
 
@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from scenarios.config import REPO_ROOT
+from scenarios.config import find_scenario, scenario_files
 from scenarios.runner import run_scenario
 
 SLOW = ("optimal_poses", "diagnosis_benchmark", "liu_vs_ols_draws", "liu_regime")  # name prefixes
@@ -25,13 +25,13 @@ def is_slow(name: str) -> bool:
 
 
 def scenario_names(everything: bool) -> list[str]:
-    names = sorted(p.stem for p in (REPO_ROOT / "scenarios").glob("*.toml"))
+    names = sorted(p.stem for p in scenario_files())
     return [n for n in names if everything or not is_slow(n)]
 
 
 def _timed(name: str, root: Path, **kwargs) -> float:
     t0 = time.perf_counter()
-    run_scenario(str(REPO_ROOT / "scenarios" / f"{name}.toml"), root, quiet=True, **kwargs)
+    run_scenario(str(find_scenario(name)), root, quiet=True, **kwargs)
     return time.perf_counter() - t0
 
 

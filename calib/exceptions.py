@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from calib.dataset import DatasetError
+from calib.data.dataset import DatasetError
 
 
 class CalibError(Exception):

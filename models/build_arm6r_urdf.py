@@ -6,7 +6,7 @@ One link per DH frame (``base``, ``link1`` .. ``link6``), one revolute joint per
 as in the table (A1 .. A6): joint i's origin is the modified-DH transform Rx(alpha_{i-1})
 Tx(a_{i-1}) Rz(theta_i) Tz(d_i) as ``xyz`` and ``rpy`` (R = Rz(y) Ry(p) Rx(r)), its axis z,
 its limits the table's. No reflector or tool in the URDF (URDFs have none): ``python -m
-twin.from_urdf models/arm6r.urdf --target target_1=link6@50,0,110 --tool link6@0,0,120
+twin.formats.from_urdf models/arm6r.urdf --target target_1=link6@50,0,110 --tool link6@0,0,120
 --out-dir DIR`` places them as in arm6r.xml, and its forward kinematics equals arm6r.xml's
 (tests/test_from_urdf.py). Every number keeps all its digits.
 """
@@ -55,7 +55,7 @@ def build() -> str:
     import sys
 
     sys.path.insert(0, str(HERE.parent))
-    from twin.dh_table import read_dh_table
+    from twin.formats.dh_table import read_dh_table
 
     table = read_dh_table(HERE / "arm6r.mdh.csv")
     lines = [

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.mjcf_numbers import canonical_quat, fmt
+from twin.formats.mjcf_numbers import canonical_quat, fmt
 
 BASE_RADIUS = 0.180
 PLATFORM_RADIUS = 0.120

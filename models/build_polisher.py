@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.mjcf_numbers import canonical_quat, fmt
+from twin.formats.mjcf_numbers import canonical_quat, fmt
 
 BETA = np.pi / 6
 BASE_RADIUS = 0.350

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from calib.exceptions import CalibError, DatasetError
-from scenarios.config import SCENARIO_DIR, ScenarioError
+from scenarios.config import ScenarioError, scenario_files
 from twin.exceptions import TwinError
 
 
@@ -24,7 +24,7 @@ def _shown(path: Path) -> str:
 
 def _os_message(exc: OSError) -> str:
     """What a file error says: ResultsWriteError's sentence, else its cause and file."""
-    from calib.write_set import WriteSetError
+    from common.write_set import WriteSetError
     from scenarios.results_folder import ResultsWriteError, describe_os_error
 
     if isinstance(exc, (ResultsWriteError, WriteSetError)):
@@ -35,7 +35,9 @@ def _os_message(exc: OSError) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m scenarios", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a scenario by name (scenarios/<name>.toml) or path")
+    run = sub.add_parser(
+        "run", help="run a scenario by name (scenarios/studies/<study>/<name>.toml) or path"
+    )
     run.add_argument("scenario")
     run.add_argument("--results", type=Path, default=None, help="results root (default results/)")
     run.add_argument("--quiet", action="store_true")
@@ -72,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     sw.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     if args.command == "list":
-        for f in sorted(SCENARIO_DIR.glob("*.toml")):
+        for f in scenario_files():
             print(f.stem)
         return 0
     if args.command == "sweep":
@@ -109,8 +111,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from scenarios.sweep import sweep
-    from scenarios.sweep_engine import EngineError
+    from scenarios.sweep.engine import EngineError
+    from scenarios.sweep.runner import sweep
 
     try:
         summary, out_dir = sweep(

@@ -27,7 +27,7 @@ from matplotlib.artist import Artist
 from matplotlib.axes import Axes
 from matplotlib.colors import Normalize
 
-from calib.atomic_files import write_with_atomic
+from common.atomic_files import write_with_atomic
 
 DPI = 110
 PNG_OPTIONS = {"compress_level": 3}  # zlib's default, 6, takes twice the time for a few % less

@@ -3,10 +3,10 @@ effect against the variable that explains it.
 
 A named effect of the diagnosis acts through one variable: an actuator's command, the command
 modulo the pitch found, the approach direction, the time of measurement. For the first named
-effect the diagnosis's own figure (calib.diagnosis_figure, the report's) is that figure. For
+effect the diagnosis's own figure (calib.diagnosis.figure, the report's) is that figure. For
 every further one, this module draws the residual without that effect (the others applied)
 and with all the named effects, against its variable, computed from the commands and the
-order as the diagnosis's library defines them (calib.diagnosis_candidates' ``explains``).
+order as the diagnosis's library defines them (calib.diagnosis.candidates' ``explains``).
 """
 
 from __future__ import annotations
@@ -16,9 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.diagnosis_apply import effect_offsets
-from calib.diagnosis_candidates import default_candidates
-from calib.model import CalibrationModel
+from calib.diagnosis import default_candidates, effect_offsets
+from calib.fit import CalibrationModel
 
 Predict = Callable[[dict[str, np.ndarray]], np.ndarray]  # named effects -> targets (N, T, 3)
 

@@ -6,45 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib.model import CalibrationModel
+from calib.fit import CalibrationModel
 from scenarios.config import Scenario, ScenarioError, values_file_problems
+from scenarios.config.effects import EFFECTS
 from scenarios.truth_draw import TruthSpec, draw_truth
-from twin.effects import (
-    ActuatorGain,
-    Backlash,
-    EncoderEccentricity,
-    GravityCompliance,
-    JointBacklash,
-    JointCompliance,
-    LeadError,
-    LeadErrorHarmonic,
-    ReflectorOffset,
-    ThermalGrowth,
-    ThermalWarmup,
-    TrackerAirTemperature,
-)
 from twin.exceptions import ModelError, ParameterError
+from twin.formats import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import ParameterSet
-
-# effects a scenario can switch on in the truth (``truth.effects``), by ``kind``; their
-# constructor arguments are the keys of each entry (checked by name when the file is loaded)
-EFFECTS = {
-    "thermal_growth": ThermalGrowth,
-    "backlash": Backlash,
-    "lead_error": LeadError,
-    "gravity_compliance": GravityCompliance,
-    "thermal_warmup": ThermalWarmup,
-    "lead_error_harmonic": LeadErrorHarmonic,
-    "joint_backlash": JointBacklash,
-    "joint_compliance": JointCompliance,
-    "actuator_gain": ActuatorGain,
-    "reflector_offset": ReflectorOffset,
-    "tracker_air_temperature": TrackerAirTemperature,
-    "encoder_eccentricity": EncoderEccentricity,
-}
-EFFECT_EXCLUDED_ARGS = ("name",)  # the effect's label in reports, not a physical argument
 
 
 @dataclass(frozen=True)

@@ -14,11 +14,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from calib.atomic_files import write_json_atomic, write_text_atomic
+from common.atomic_files import write_json_atomic, write_text_atomic
 from scenarios.config import REPO_ROOT, Scenario, ScenarioError, load_scenario
 from scenarios.progress import Progress
-from scenarios.recording import Recorder
+from scenarios.recording.recorder import Recorder
 from scenarios.results_folder import KEPT, ResultsWriteError, replaced_whole
+from scenarios.studies import STUDIES
 
 __all__ = [
     "KEPT",
@@ -31,25 +32,6 @@ __all__ = [
 
 StudyFn = Callable[[Scenario, Path, Progress, Recorder], dict[str, Any]]
 ReportFn = Callable[[dict[str, Any]], str]
-
-# study name -> (module with run(scenario, out_dir, progress), module with report(summary))
-STUDIES = {
-    "hexapod_paper": ("scenarios.hexapod_paper", "scenarios.hexapod_report"),
-    "polisher_identifiability": (
-        "scenarios.polisher_identifiability",
-        "scenarios.polisher_identifiability_report",
-    ),
-    "liu_vs_ols": ("scenarios.liu_vs_ols", "scenarios.liu_vs_ols_report"),
-    "liu_regime": ("scenarios.liu_regime", "scenarios.liu_regime_report"),
-    "optimal_poses": ("scenarios.optimal_poses", "scenarios.optimal_poses_report"),
-    "undeclared_effect": ("scenarios.undeclared_effect", "scenarios.undeclared_effect_report"),
-    "serial_arm": ("scenarios.serial_arm", "scenarios.serial_arm_report"),
-    "measured_loop": ("scenarios.measured_loop", "scenarios.measured_loop_report"),
-    "diagnosis_benchmark": (
-        "scenarios.diagnosis_benchmark",
-        "scenarios.diagnosis_benchmark_report",
-    ),
-}
 
 
 class RunInterrupted(KeyboardInterrupt):

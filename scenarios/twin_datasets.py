@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.dataset import Dataset, read_dataset, write_dataset
+from calib.data import Dataset, read_dataset, write_dataset
 from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.tracker import PoseNoise, Tracker

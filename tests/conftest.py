@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import ParameterSet
 
 ROOT = Path(__file__).resolve().parent.parent

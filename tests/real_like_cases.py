@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.dataset import write_dataset
+from calib.data import write_dataset
 from scenarios.twin_datasets import tracker_frame_dataset
 from twin.effects import ActuatorGain, JointCompliance, ReflectorOffset
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -23,6 +23,8 @@ def figures_off() -> Iterator[None]:
     files are what is checked; the Ray sweep and the last pass of the resumed sweep draw
     theirs, and test_scenario_undeclared_effect checks the diagnosis plot."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr("scenarios.sweep.distribution_pngs", lambda folder, name, results: [])
-        mp.setattr("scenarios.undeclared_effect.save_diagnosis_png", lambda diag, path: path)
+        mp.setattr("scenarios.sweep.runner.distribution_pngs", lambda folder, name, results: [])
+        mp.setattr(
+            "scenarios.studies.undeclared_effect.study.save_diagnosis_png", lambda diag, path: path
+        )
         yield

@@ -17,20 +17,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.compensation import compensated_commands
-from calib.identifiability import analyse
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel, ColumnJacobian
+from calib.analysis.identifiability import analyse
+from calib.compensate.compensation import compensated_commands
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel, ColumnJacobian
+from calib.fit.observations import Observations
 from twin.effects.actuator_gain import ActuatorGain
 from twin.exceptions import ParameterError
-from twin.kinematics_batch import forward_batch
-from twin.kinematics_inverse_batch import actuator_joint_parameters
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.inverse_batch import actuator_joint_parameters
+from twin.kinematics.sensitivity_batch import target_jacobian_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import KINDS, Parameter, ParameterSet
 from twin.rotations import rotvec_from_matrix
-from twin.sensitivity_batch import target_jacobian_batch
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import commands_for_poses, random_poses
 

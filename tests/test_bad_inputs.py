@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.dataset import Dataset, DatasetError, read_dataset, sidecar_path, write_dataset
+from calib.data import Dataset, DatasetError, read_dataset, sidecar_path, write_dataset
 from twin.exceptions import ParameterError, WorkspaceError
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.workspace import check_command_strokes, commands_for_poses
 
 ROOT = Path(__file__).resolve().parent.parent

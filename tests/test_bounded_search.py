@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from calib.bounded_search import bounded_search, minimise_together
+from calib.diagnosis.bounded_search import bounded_search, minimise_together
 
 
 def _functions():

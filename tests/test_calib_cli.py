@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.__main__ import main
-from calib.dataset import write_dataset
+from calib.cli.commands import main
+from calib.data import write_dataset
 from scenarios.twin_datasets import measured_dataset
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.__main__ import main
-from calib.dataset import sidecar_path, write_dataset
-from calib.verdict import EXIT_BAD_INPUT, EXIT_OK, EXIT_POOR_FIT
-from scenarios import serial_arm
+import scenarios.studies.serial_arm.study as serial_arm
+from calib.cli.commands import main
+from calib.data import sidecar_path, write_dataset
+from calib.fit.verdict import EXIT_BAD_INPUT, EXIT_OK, EXIT_POOR_FIT
 from scenarios.config import ScenarioError
 from scenarios.runner import run_scenario
 from scenarios.twin_datasets import measured_dataset, tracker_frame_dataset
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.__main__ import main
-from calib.data_hints import target_label_hint, unit_hint
-from calib.dataset import write_dataset
-from calib.verdict import (
+from calib.cli.commands import main
+from calib.data import write_dataset
+from calib.data.hints import target_label_hint, unit_hint
+from calib.fit.verdict import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
     EXIT_POOR_FIT,
@@ -28,8 +28,8 @@ from calib.verdict import (
     judge_fit,
 )
 from scenarios.twin_datasets import measured_dataset
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

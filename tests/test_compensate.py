@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from to_machine_support import MODELS, ROOT, plausible_values, result_file
 
-from calib.__main__ import main
-from calib.registration import Registration
-from twin.kinematics import forward, pose_to_frame
-from twin.kinematics_batch import forward_batch
+from calib.cli.commands import main
+from calib.fit.registration import Registration
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward, pose_to_frame
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.rotations import matrix_from_rpy, rotation_angle, rpy_from_matrix
 from twin.workspace import random_poses
 
@@ -199,8 +199,8 @@ def test_another_machines_result_is_refused(tmp_path, capsys):
 def test_identified_actuator_gains_turn_joint_values_into_commands(tmp_path, capsys):
     """A result of identify --with (gains added to the error model): the commands differ from
     the joint values by the gains, and the joints they give put the tool at the poses."""
-    from calib.identified_machine import load_identified_machine
-    from calib.identify import model_from_files
+    from calib.compensate.identified_machine import load_identified_machine
+    from calib.fit.observations import model_from_files
     from twin.parameters import Parameter, ParameterSet
 
     nominal = Mechanism.from_xml(HEXAPOD)

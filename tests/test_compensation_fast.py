@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.compensation import TwistCompensation, twist_compensated_commands
-from calib.model import CalibrationModel
+from calib.compensate.compensation import TwistCompensation, twist_compensated_commands
+from calib.fit.model import CalibrationModel
 from twin.exceptions import WorkspaceError
-from twin.kinematics import inverse
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.sensitivity import tool_twist_jacobian
+from twin.kinematics.single_pose import inverse
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import matrix_from_rotvec, matrix_from_rpy, rpy_from_matrix
-from twin.sensitivity import tool_twist_jacobian
 from twin.workspace import checked_commands, commands_for_poses, layer_poses
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -95,7 +95,7 @@ def test_prepared_inverse_kinematics_are_the_controllers_commands(polisher):
 
 def test_poses_corrected_at_once_equal_pose_by_pose():
     """Bitwise: the correction of Eq. (16) on whole arrays against each pose's own."""
-    from calib.compensation import corrected_poses
+    from calib.compensate.compensation import corrected_poses
 
     rng = np.random.default_rng(8)
     for n in (1, 9, 98):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.dataset import (
+from calib.data import (
     Dataset,
     DatasetError,
     read_dataset,

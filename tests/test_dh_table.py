@@ -2,7 +2,7 @@
 error-model entry is exactly its DH parameter.
 
 The reference kinematics here is written from the textbook formulas (Craig's eq. 3.6 for the
-modified convention, the classic DH matrix for the standard one), not from twin.dh_mjcf. The
+modified convention, the classic DH matrix for the standard one), not from twin.formats.dh_mjcf. The
 random tables are written with every digit (``number=exact``): the files' 12 significant
 digits quantise a generic quaternion by up to 5e-13, which is checked separately.
 """
@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from test_generated_models import toml_differences, xml_differences
 
-from twin.dh_mjcf import build_parameters, build_xml, exact
-from twin.dh_table import DHSite, DHTable, DHTableError, main, parse_dh_table, read_dh_table
+from twin.formats.dh_mjcf import build_parameters, build_xml, exact
+from twin.formats.dh_table import DHSite, DHTable, DHTableError, main, parse_dh_table, read_dh_table
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import matrix_from_rotvec, rpy_from_matrix
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -352,7 +352,7 @@ def test_three_reflector_variant(tmp_path):
 
 
 def test_command_line_writes_what_the_functions_build(tmp_path):
-    cmd = [sys.executable, "-m", "twin.dh_table", str(TABLE), "--name", "arm6r"]
+    cmd = [sys.executable, "-m", "twin.formats.dh_table", str(TABLE), "--name", "arm6r"]
     cmd += ["--out-dir", str(tmp_path), "--targets", "target_1"]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr

@@ -10,13 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.diagnosis import diagnose
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
+from calib.diagnosis.core import diagnose
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -12,19 +12,19 @@ import pytest
 from recording_faces import assert_every_face_has_data
 
 from scenarios.config import ScenarioError, load_scenario
-from scenarios.diagnosis_benchmark import (
+from scenarios.machine_setup import EFFECTS
+from scenarios.runner import run_scenario
+from scenarios.studies.diagnosis_benchmark.study import (
     ACCEPTED,
     EFFECT_TYPES,
     SCALED,
     is_correct,
     not_applicable,
 )
-from scenarios.machine_setup import EFFECTS
-from scenarios.runner import run_scenario
 from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent
-COMMITTED = ROOT / "scenarios" / "diagnosis_benchmark.toml"
+COMMITTED = ROOT / "scenarios" / "studies" / "diagnosis_benchmark" / "diagnosis_benchmark.toml"
 
 
 def _reduced(tmp_path: Path, **benchmark) -> Path:
@@ -68,7 +68,7 @@ def run(tmp_path_factory):
 
 def test_committed_file_is_a_meaningful_benchmark():
     s = load_scenario("diagnosis_benchmark")
-    from scenarios.diagnosis_benchmark import cases
+    from scenarios.studies.diagnosis_benchmark.study import cases
 
     args, skipped = cases(s)
     kinds = {a[3] for a in args}
@@ -107,7 +107,7 @@ def _case(kind, named, multiplier=3.0, machine="hexapod", absorbed=False, p=1e-9
 
 
 def test_absorbed_cases_are_counted_beside_the_rate_not_in_it():
-    from scenarios.diagnosis_benchmark import ABSORBED_P, aggregate
+    from scenarios.studies.diagnosis_benchmark.study import ABSORBED_P, aggregate
 
     results = [
         _case("backlash", "backlash"),
@@ -183,7 +183,7 @@ def test_summary_contract_clear_case_and_no_false_alarm(run):
 
 def test_confusion_heat_map_counts(tmp_path):
     """The heat map holds the counts of the table: its image is the confusion matrix."""
-    from scenarios.diagnosis_benchmark_figures import confusion_png
+    from scenarios.studies.diagnosis_benchmark.figures import confusion_png
 
     captured = {}
     real = figures_module().plt.Axes.imshow

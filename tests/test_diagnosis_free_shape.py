@@ -14,14 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.diagnosis import TestSet, diagnose
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
+from calib.diagnosis.core import TestSet, diagnose
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.effects import LeadError, ThermalGrowth
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import Parameter, ParameterSet
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses

@@ -24,15 +24,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.diagnosis import TestSet, diagnose, effect_offsets, effect_target_shifts
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
+from calib.diagnosis.core import TestSet, diagnose, effect_offsets, effect_target_shifts
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.effects import JointBacklash, JointCompliance, ThermalWarmup
 from twin.effects.encoder_eccentricity import EncoderEccentricity
+from twin.formats.parameter_file import load_parameter_set
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.tracker import Tracker, TrackerNoise
 
 ROOT = Path(__file__).resolve().parent.parent

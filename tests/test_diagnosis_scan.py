@@ -9,26 +9,29 @@ import dataclasses
 import numpy as np
 import pytest
 
-from calib.diagnosis_candidates import PoseRows, library
-from calib.diagnosis_context import Context
-from calib.diagnosis_fit import (
-    INNER_FOLDS,
+from calib.diagnosis.candidate import PoseRows
+from calib.diagnosis.candidates import library
+from calib.diagnosis.context import Context
+from calib.diagnosis.gravity import GravityLoads
+from calib.diagnosis.problem import (
     RCOND,
     Problem,
-    _explained,
-    _inner_cv,
-    _normal_equations_offsets,
     _orth,
     fit,
     fold_labels,
-    grid_offsets,
     heldout_sse,
     orth_and_pinv,
+)
+from calib.diagnosis.shape_scan import (
+    INNER_FOLDS,
+    _explained,
+    _inner_cv,
+    _normal_equations_offsets,
+    grid_offsets,
     projection,
     rss_at,
     rss_over_grid,
 )
-from calib.diagnosis_gravity import GravityLoads
 
 N, T, A, P = 60, 3, 6, 12
 

@@ -8,10 +8,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from twin.closure import closure_jacobian, update_kinematics
 from twin.effects import Backlash, GravityCompliance, LeadError, ThermalGrowth
 from twin.effects.base import apply_actuator_effects
-from twin.kinematics import forward
+from twin.kinematics.closure import closure_jacobian, update_kinematics
+from twin.kinematics.single_pose import forward
 from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.tracker import Tracker, TrackerNoise

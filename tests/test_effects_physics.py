@@ -22,7 +22,7 @@ from twin.effects import (
 from twin.effects.gravity_compliance import actuator_forces
 from twin.effects.joint_backlash import ARCSEC
 from twin.exceptions import ClosureError, ModelError, WorkspaceError
-from twin.kinematics import forward
+from twin.kinematics.single_pose import forward
 from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.tracker import AirCompensation, PoseNoise, Tracker, TrackerNoise, air_refractive_index

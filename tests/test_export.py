@@ -17,17 +17,17 @@ import numpy as np
 import pytest
 from to_machine_support import MODELS, ROOT, plausible_values, result_file
 
-from calib.__main__ import main
-from calib.dataset import write_dataset
-from calib.model_export import kinematics_difference, probe_commands
+from calib.cli.commands import main
+from calib.compensate.model_export import kinematics_difference, probe_commands
+from calib.data import write_dataset
 from scenarios.twin_datasets import measured_dataset
-from twin.dh_extract import dh_table_of
-from twin.dh_mjcf import build_xml, exact
-from twin.dh_table import parse_dh_table, read_dh_table
-from twin.error_model import error_parameters
+from twin.formats.dh_extract import dh_table_of
+from twin.formats.dh_mjcf import build_xml, exact
+from twin.formats.dh_table import parse_dh_table, read_dh_table
+from twin.formats.error_model import error_parameters
+from twin.formats.mjcf_values import mjcf_with_values
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.mjcf_values import mjcf_with_values
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import Parameter, ParameterSet
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
@@ -138,7 +138,7 @@ def test_export_cli_writes_the_model_and_the_calibrated_dh_table(tmp_path, capsy
     assert (
         kinematics_difference(identified, Mechanism.from_xml(out), commands).max_position_m < 1e-9
     )
-    # the calibrated DH table builds the same arm again (python -m twin.dh_table)
+    # the calibrated DH table builds the same arm again (python -m twin.formats.dh_table)
     again = Mechanism.from_xml_string(build_xml(read_dh_table(dh_out), "arm6r", number=exact))
     assert kinematics_difference(identified, again, commands).max_position_m < 1e-9
     # with no errors the table read back from the model is the committed one
@@ -155,7 +155,7 @@ def test_dh_out_refuses_a_geometry_no_dh_row_holds_and_writes_nothing(tmp_path, 
     nominal = Mechanism.from_xml(xml)
     params = error_parameters(nominal)  # the complete model: offsets a DH row cannot hold
     toml = tmp_path / "complete.params.toml"
-    from twin.error_model import error_model_toml
+    from twin.formats.error_model import error_model_toml
 
     toml.write_text(error_model_toml(nominal, str(xml)))
     values = np.zeros(len(params))

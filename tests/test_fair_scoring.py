@@ -1,4 +1,4 @@
-"""Stages scored on the same machine state (scenarios.liu_vs_ols_pipeline.score).
+"""Stages scored on the same machine state (scenarios.studies.liu_vs_ols.pipeline.score).
 
 A truth with a strong thermal drift (the limbs grow 0.5 um per metre with every pose
 measured) and two identical estimators: scored one after the other as the sequence runs on,
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from scenarios.config import Scenario, load_scenario
-from scenarios.liu_vs_ols_draws import draw_task
-from scenarios.liu_vs_ols_pipeline import (
+from scenarios.studies.liu_vs_ols.draws import draw_task
+from scenarios.studies.liu_vs_ols.pipeline import (
     CONTROL,
     calibrate,
     make_bench,

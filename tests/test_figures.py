@@ -200,7 +200,7 @@ def test_liu_vs_ols_error_maps_equal_full_draws(tmp_path, monkeypatch):
     savefig of each quantity's figure gives."""
     from types import SimpleNamespace
 
-    from scenarios import liu_vs_ols_figures
+    import scenarios.studies.liu_vs_ols.figures as liu_vs_ols_figures
 
     rng = np.random.default_rng(4)
     xy = _grid(5, 0.2)  # metres, a 5 x 5 layer

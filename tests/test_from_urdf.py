@@ -1,4 +1,5 @@
-"""URDF in (python -m twin.from_urdf) and the complete error model (python -m twin.error_model).
+"""URDF in (python -m twin.formats.from_urdf) and the complete error model (python -m
+twin.formats.error_model).
 
 The URDF of models/arm6r gives arm6r.xml's forward kinematics to 1e-9 m; fixed, continuous
 and prismatic joints, inertials and meshes are read; a generated error model spans every
@@ -12,13 +13,13 @@ import numpy as np
 import pytest
 from to_machine_support import MODELS
 
-from calib.model import CalibrationModel
-from calib.model_export import kinematics_difference, probe_commands
-from twin.error_model import error_parameters
-from twin.error_model import main as error_model_main
-from twin.from_urdf import main as from_urdf_main
+from calib.compensate.model_export import kinematics_difference, probe_commands
+from calib.fit.model import CalibrationModel
+from twin.formats.error_model import error_parameters
+from twin.formats.error_model import main as error_model_main
+from twin.formats.from_urdf import main as from_urdf_main
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 
 ARM_TOOL = ["--target", "target_1=link6@50,0,110", "--tool", "link6@0,0,120"]
 

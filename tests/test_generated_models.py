@@ -1,6 +1,6 @@
 """The committed models are what their generators make, on any CPU, within tolerance.
 
-Generated files are compared numerically (``twin.mjcf_numbers`` explains why text is not
+Generated files are compared numerically (``twin.formats.mjcf_numbers`` explains why text is not
 enough): the same elements and attributes in the same order, strings equal, numbers equal
 to 1e-9 (metres, radians, unitless axes). Regenerating under two OpenBLAS core types gives
 the same numbers too.
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.mjcf_numbers import canonical_quat, fmt, snap
+from twin.formats.mjcf_numbers import canonical_quat, fmt, snap
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = {"hexapod": "hexapod_rrrprr", "polisher": "polisher"}

@@ -9,17 +9,18 @@ import mujoco
 import numpy as np
 import pytest
 
-from calib.dataset import Dataset, DatasetError
+import twin.kinematics.single_pose as kinematics
+from calib.data import Dataset, DatasetError
 from calib.exceptions import IdentifiabilityError
-from calib.identify import Observations, bind_dataset, identify
-from calib.model import CalibrationModel
-from twin import kinematics
-from twin.closure import closure_jacobian, closure_residual, update_kinematics
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations, bind_dataset
 from twin.exceptions import ClosureError, ModelError, WorkspaceError
-from twin.kinematics import forward, inverse
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.closure import closure_jacobian, closure_residual, update_kinematics
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.rotations import rotvec_from_matrix
 from twin.workspace import random_poses
 
@@ -97,7 +98,7 @@ def test_closure_residual_and_round_trips(hexapod, poses):
 
 
 def test_batch_equals_single(hexapod, poses, monkeypatch):
-    import twin.kinematics_batch as kb
+    import twin.kinematics.batch as kb
 
     _, commands = poses
     monkeypatch.setattr(kb, "CHUNK", 5)  # several chunks, one of them partial

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from twin.kinematics import inverse
+from twin.kinematics.single_pose import inverse
 
 ROOT = Path(__file__).resolve().parent.parent
 HEXAPOD_XML = ROOT / "models" / "hexapod_rrrprr.xml"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.hexapod_report import (
+from scenarios.studies.hexapod_paper.report import (
     deviation_sentence,
     largest_deviation_p,
     noise_free_sentence,
@@ -89,7 +89,7 @@ def test_a_report_of_a_random_truth_does_not_claim_the_papers(tmp_path):
 
 
 def _paper() -> dict:
-    from scenarios.hexapod_paper import PAPER
+    from scenarios.studies.hexapod_paper.study import PAPER
 
     return PAPER
 

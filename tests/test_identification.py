@@ -9,12 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.dataset import Dataset, DatasetError
+from calib.analysis.identifiability import analyse
+from calib.data import Dataset, DatasetError
 from calib.exceptions import IdentifiabilityError
-from calib.identifiability import analyse
-from calib.identify import Observations, bind_dataset, identify
-from calib.model import CalibrationModel
-from twin.kinematics_batch import forward_batch
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations, bind_dataset
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses
 

@@ -20,23 +20,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import calib.joint_compliance as joint_compliance
-import calib.model as calib_model
-from calib.compensate_poses import solve_each
-from calib.compensation import compensated_commands, reachable_compensated_commands
-from calib.effect_kinds import compliance_parameters
-from calib.identifiability import analyse
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel, ColumnJacobian
+import calib.fit.joint_compliance as joint_compliance
+import calib.fit.model as calib_model
+from calib.analysis.identifiability import analyse
+from calib.compensate.compensation import compensated_commands, reachable_compensated_commands
+from calib.compensate.poses import solve_each
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel, ColumnJacobian
+from calib.fit.observations import Observations
+from calib.loop.effect_kinds import compliance_parameters
 from twin.effects import ActuatorGain, JointCompliance
 from twin.exceptions import ParameterError
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity_batch import target_jacobian_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import rpy_from_matrix
-from twin.sensitivity_batch import target_jacobian_batch
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 

@@ -8,18 +8,16 @@ import mujoco
 import numpy as np
 import pytest
 
-import twin.kinematics as kinematics
-import twin.kinematics_batch as kinematics_batch
-from twin.closure import (
+import twin.kinematics.batch as kinematics_batch
+import twin.kinematics.single_pose as kinematics
+from twin.exceptions import ClosureError, ModelError, WorkspaceError
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.closure import (
     closure_jacobian,
     closure_residual,
-    closure_sites,
     update_kinematics,
 )
-from twin.dof_axes import DofAxes
-from twin.exceptions import ClosureError, ModelError, WorkspaceError
-from twin.kinematics import forward, inverse, pose_to_frame
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.single_pose import forward, inverse, pose_to_frame
 from twin.mechanism import Mechanism
 from twin.rotations import rotvec_from_matrix, rpy_from_matrix
 from twin.workspace import random_poses
@@ -162,44 +160,6 @@ def test_closure_jacobian_position_rows_anywhere(hexapod, reachable):
     fd = _fd_closure_jacobian(hexapod, q)
     rows = _position_rows(hexapod)
     assert np.max(np.abs(fd[rows] - jac[rows])) < 1e-6 * np.max(np.abs(jac[rows]))
-
-
-def _frames(mech: Mechanism, configurations: list[np.ndarray]) -> dict[str, np.ndarray]:
-    out: dict[str, list] = {f: [] for f in kinematics_batch.FIELDS}
-    for q in configurations:
-        update_kinematics(mech, q)
-        for f in kinematics_batch.FIELDS:
-            out[f].append(getattr(mech.data, f).copy())
-    return {f: np.array(v) for f, v in out.items()}
-
-
-def test_numpy_jacobian_equals_mujoco_jacobian(hexapod, reachable):
-    rng = np.random.default_rng(11)
-    closed = [forward(hexapod, c).qpos for c in reachable[1][:3]]
-    configurations = [
-        hexapod.home_qpos.copy(),
-        *closed,
-        _perturbed(hexapod, closed[0], rng, 0.1),
-        _perturbed(hexapod, closed[1], rng, 0.3),
-    ]
-    free = hexapod.free_dofs()
-    a, b = closure_sites(hexapod)
-    sites = np.concatenate([a, b])
-    frames = _frames(hexapod, configurations)
-    axes = DofAxes(hexapod.model, sites, free)
-    numpy_jac = axes.closure_jacobian(
-        hexapod,
-        frames["xaxis"],
-        frames["xanchor"],
-        frames["xmat"],
-        frames["site_xpos"][:, sites],
-        free,
-    )
-    assert numpy_jac.shape == (len(configurations), 36, len(free))
-    for k, q in enumerate(configurations):
-        update_kinematics(hexapod, q)
-        expected = closure_jacobian(hexapod)[:, free]
-        np.testing.assert_allclose(numpy_jac[k], expected, rtol=0, atol=1e-12)
 
 
 # ----------------------------------------------------------------------------- user errors

@@ -1,4 +1,4 @@
-"""The compiled kernels of batched forward kinematics (twin.kinematics_compiled*).
+"""The compiled kernels of batched forward kinematics (twin.kinematics.compiled*).
 
 * their kinematic tree equals MuJoCo's ``mj_kinematics`` for every joint kind (hinge with
   general and negative axes, slide, ball, free), joint offsets and turned sites;
@@ -17,11 +17,11 @@ import pytest
 from test_kinematics_fast import MACHINES, machines_with_commands
 
 from twin.exceptions import ClosureError
-from twin.kinematics import forward
-from twin.kinematics_batch import forward_batch
-from twin.kinematics_compiled import compiled_plan, model_numbers
-from twin.kinematics_compiled_kernels import site_frame, tree
-from twin.kinematics_fast import fast_kinematics
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.compiled import compiled_plan, model_numbers
+from twin.kinematics.kernels import site_frame, tree
+from twin.kinematics.single_pose import forward
+from twin.kinematics.structure import fast_kinematics
 from twin.mechanism import Mechanism
 
 
@@ -167,7 +167,8 @@ def test_a_pose_that_cannot_close_is_named(machines):
 
 @pytest.mark.parametrize("name", ["hexapod_rrrprr", "polisher"])
 def test_second_order_predictor_starts_closer_and_changes_no_solution(machines, name, monkeypatch):
-    import twin.kinematics_fast as kf
+    import twin.kinematics.batch as kb
+    import twin.kinematics.structure as kf
 
     mech, commands = machines[name]
     fk = fast_kinematics(mech)
@@ -182,9 +183,9 @@ def test_second_order_predictor_starts_closer_and_changes_no_solution(machines, 
     exact = forward_batch(mech, commands, start=home)
     starts = {}
     for order, minimum in (("first", 10**9), ("second", 1)):
-        monkeypatch.setattr(kf, "CURVATURE_MIN", minimum)
+        monkeypatch.setattr(kb, "CURVATURE_MIN", minimum)
         q0 = np.repeat(home[:, None], len(commands), axis=1)
-        kf.predict_start(fk, q0, commands)
+        kb.predict_start(fk, q0, commands)
         starts[order] = np.abs(kf.difference_soa(fk, q0, exact.qpos.T)).max(axis=0)
         sol = forward_batch(mech, commands)
         np.testing.assert_allclose(sol.targets, exact.targets, rtol=0, atol=1e-12)

@@ -19,12 +19,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from twin import kinematics_fast, kinematics_reduced, small_systems
-from twin.kinematics import forward
-from twin.kinematics_adjoint import adjoint_solve
-from twin.kinematics_batch import forward_batch
-from twin.kinematics_fast import fast_kinematics
-from twin.kinematics_tree import TreePlan, tree_frames
+import twin.kinematics.reduced as kinematics_reduced
+import twin.kinematics.small_systems as small_systems
+import twin.kinematics.structure as kinematics_fast
+from twin.kinematics.adjoint import adjoint_solve
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward
+from twin.kinematics.structure import fast_kinematics
+from twin.kinematics.tree import TreePlan, tree_frames
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses
 
@@ -223,7 +225,7 @@ def test_cold_start_predictor_changes_nothing(machines, monkeypatch, compiled):
     mech, commands = machines["hexapod_rrrprr"]
     predicted = forward_batch(mech, commands, compiled=compiled)
     monkeypatch.setattr(kinematics_fast, "PREDICT_MIN", 10**9)
-    import twin.kinematics_batch as kb
+    import twin.kinematics.batch as kb
 
     monkeypatch.setattr(kb, "PREDICT_MIN", 10**9)
     plain = forward_batch(mech, commands, compiled=compiled)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import forward, inverse
-from twin.kinematics_inverse_batch import actuator_twist_jacobians, commands_near, inverse_near
+from twin.kinematics.inverse_batch import actuator_twist_jacobians, commands_near, inverse_near
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
 from twin.rotations import rpy_from_matrix
 from twin.workspace import commands_for_poses, workspace_box

@@ -11,11 +11,11 @@ import pytest
 from recording_faces import assert_every_face_has_data
 
 from scenarios.config import ScenarioError, load_scenario
-from scenarios.liu_regime import aggregate_cells, placement_poses, tilted
-from scenarios.liu_vs_ols_pipeline import CONTROL, make_bench
 from scenarios.runner import run_scenario
-from twin.kinematics import inverse
-from twin.kinematics_batch import forward_batch
+from scenarios.studies.liu_regime.study import aggregate_cells, placement_poses, tilted
+from scenarios.studies.liu_vs_ols.pipeline import CONTROL, make_bench
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import inverse
 from twin.rotations import matrix_from_rpy
 
 ESTIMATORS = ("liu_paper_deg", "liu", "ridge", "pcr")

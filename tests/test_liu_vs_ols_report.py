@@ -10,9 +10,9 @@ import copy
 
 import pytest
 
-from scenarios.liu_regime_report import report as regime_report
-from scenarios.liu_vs_ols_pipeline import PAPER
-from scenarios.liu_vs_ols_report import report
+from scenarios.studies.liu_regime.report import report as regime_report
+from scenarios.studies.liu_vs_ols.pipeline import PAPER
+from scenarios.studies.liu_vs_ols.report import report
 
 
 def _row(mean: float, mx: float) -> dict[str, float]:

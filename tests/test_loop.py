@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.loop_compensation import invert_correction, loop_commands
-from calib.loop_effect import diagnosed_correction
-from calib.loop_fit import fit_with_effect
-from calib.model import CalibrationModel
-from calib.nominal_targets import nominal_targets
+from calib.fit.model import CalibrationModel
+from calib.loop.compensation import invert_correction, loop_commands
+from calib.loop.effect import diagnosed_correction
+from calib.loop.fit import fit_with_effect
+from calib.two_step.nominal import nominal_targets
+from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.workspace import commands_for_poses, layer_poses
 
 
@@ -98,12 +98,12 @@ def test_fixed_point_refuses_a_correction_steeper_than_the_command(polisher):
 
 
 def test_column_jacobian_equals_the_whole_one_and_the_actuators(polisher):
-    """The loop's Jacobian in one pass (calib.model.ColumnJacobian) against the whole
+    """The loop's Jacobian in one pass (calib.fit.model.ColumnJacobian) against the whole
     identification Jacobian's columns and the per-actuator one, at geometry where the body
     rotations left out of the columns are not zero (their rotation vectors compose)."""
-    from calib.diagnosis_apply import actuator_jacobians_batch
-    from calib.diagnosis_context import actuator_offsets
-    from calib.model import ColumnJacobian
+    from calib.diagnosis.apply import actuator_jacobians_batch
+    from calib.diagnosis.context import actuator_offsets
+    from calib.fit.model import ColumnJacobian
     from twin.parameters import KINDS, Parameter, ParameterSet
 
     model = polisher

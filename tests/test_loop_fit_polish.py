@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from calib.loop_fit import gauss_newton_polish, std_errors
+from calib.loop.fit import gauss_newton_polish, std_errors
 
 
 def test_std_errors_equal_the_normal_equations_on_a_well_conditioned_jacobian():

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.__main__ import main
-from calib.dataset import read_dataset, write_dataset
-from calib.dataset_select import subset
-from calib.result_file import load_result
+from calib.cli.commands import main
+from calib.data import read_dataset, write_dataset
+from calib.data.result_file import load_result
+from calib.data.select import subset
 from scenarios.runner import run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 import real_like_cases as cases
 
-from calib.__main__ import main
-from calib.dataset import read_dataset
-from calib.dataset_select import select_set
-from calib.diagnosis_context import reflector_span
-from calib.identify import bind_dataset, model_from_files
-from calib.regularisation import TIE
-from calib.verdict import EXIT_OK, EXIT_POOR_FIT
-from calib.verify import verify
-from calib.workflow import calibrate
+from calib.cli.commands import main
+from calib.data import read_dataset
+from calib.data.select import select_set
+from calib.diagnosis.context import reflector_span
+from calib.fit.observations import bind_dataset, model_from_files
+from calib.fit.regularisation import TIE
+from calib.fit.verdict import EXIT_OK, EXIT_POOR_FIT
+from calib.fit.verify import verify
+from calib.fit.workflow import calibrate
 
 
 def _cli(capsys, *args: str) -> tuple[int, str]:
@@ -334,11 +334,11 @@ def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
 def test_default_never_worse_than_plain_on_the_polisher(tmp_path):
     """The polisher's 150-parameter error model on random poses: 51 identifiable, some of
     them weakly; keeping the weakest directions at zero must not cost held-out accuracy."""
-    from calib.dataset import Dataset
-    from calib.model import CalibrationModel
+    from calib.data import Dataset
+    from calib.fit.model import CalibrationModel
+    from twin.formats.parameter_file import load_parameter_set
     from twin.measurement import measure
     from twin.mechanism import Mechanism
-    from twin.parameter_file import load_parameter_set
     from twin.tracker import Tracker, TrackerNoise
     from twin.workspace import random_poses
 

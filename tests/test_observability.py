@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calib.analysis.observability_indices import (
+    INDICES,
+    all_indices,
+    better,
+    index_with_each,
+    observability,
+)
 from calib.exceptions import IdentifiabilityError
-from calib.observability import INDICES, all_indices, better, index_with_each, observability
 
 
 def test_orthonormal_columns_are_ideal():

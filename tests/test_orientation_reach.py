@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.orientation_reach import deg_per_mm, orientation_reach
-from twin.kinematics import inverse
+from calib.analysis.orientation import deg_per_mm, orientation_reach
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.sensitivity import tool_twist_jacobian
+from twin.kinematics.single_pose import inverse
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.parameters import KINDS
-from twin.sensitivity import tool_twist_jacobian
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
-from twin.kinematics import forward, inverse
-from twin.kinematics_batch import forward_batch
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.workspace import random_poses

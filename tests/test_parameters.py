@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from twin.exceptions import ParameterError
-from twin.kinematics import forward
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity import target_jacobian, tool_twist_jacobian
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import matrix_from_rotvec, quat_from_rotvec, quat_multiply, rotvec_from_matrix
-from twin.sensitivity import target_jacobian, tool_twist_jacobian
 from twin.workspace import random_poses
 
 ROOT = Path(__file__).resolve().parent.parent

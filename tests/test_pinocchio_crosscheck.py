@@ -16,9 +16,7 @@ pin = pytest.importorskip("pinocchio")
 import mujoco  # noqa: E402
 
 from twin.exceptions import ModelError  # noqa: E402
-from twin.kinematics import forward  # noqa: E402
-from twin.mechanism import Mechanism  # noqa: E402
-from twin.pinocchio_model import (  # noqa: E402
+from twin.kinematics.pinocchio_model import (  # noqa: E402
     frame_jacobian_world,
     frame_placement,
     pinocchio_from_mjcf,
@@ -27,6 +25,8 @@ from twin.pinocchio_model import (  # noqa: E402
     site_frame_id,
     velocity_map,
 )
+from twin.kinematics.single_pose import forward  # noqa: E402
+from twin.mechanism import Mechanism  # noqa: E402
 from twin.rotations import rotvec_from_matrix  # noqa: E402
 from twin.workspace import random_poses  # noqa: E402
 

@@ -8,18 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calib.analysis.identifiability import analyse
+from calib.analysis.reconstruction import correlation_reconstruction, spectral_reconstruction
+from calib.analysis.screw_polisher import PolisherScrewModel
 from calib.exceptions import IdentifiabilityError
-from calib.identifiability import analyse
-from calib.model import CalibrationModel
-from calib.reconstruction import correlation_reconstruction, spectral_reconstruction
-from calib.screw_polisher import PolisherScrewModel
-from scenarios.polisher_identifiability import fd_jacobian, group_relative_error
+from calib.fit.model import CalibrationModel
+from scenarios.studies.polisher_identifiability.study import fd_jacobian, group_relative_error
 from twin.exceptions import WorkspaceError
-from twin.kinematics import forward, inverse
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.sensitivity import target_jacobian, tool_twist_jacobian
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import rotvec_from_matrix
-from twin.sensitivity import target_jacobian, tool_twist_jacobian
 from twin.workspace import commands_for_poses, layer_poses
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -168,7 +168,7 @@ def test_one_node_identifies_only_the_encoders(polisher, params):
     """Three targets give the full pose, so H_xi has full rank even at one node (the paper:
     rank(H_xi) = f at nonsingular configurations); the structural errors are what is lost,
     and fine calibration refuses such a plan."""
-    from calib.fine import fine_problem
+    from calib.two_step.fine import fine_problem
 
     model = CalibrationModel(polisher, params)
     xi = np.array([n.endswith(".encoder") for n in params.names])

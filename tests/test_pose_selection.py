@@ -8,9 +8,15 @@ import numpy as np
 import pytest
 from recording_faces import assert_every_face_has_data
 
+from calib.analysis.observability_indices import observability
+from calib.analysis.pose_selection import (
+    Selection,
+    exchange,
+    greedy,
+    paper_selection,
+    stopping_count,
+)
 from calib.exceptions import IdentifiabilityError
-from calib.observability import observability
-from calib.pose_selection import Selection, exchange, greedy, paper_selection, stopping_count
 from scenarios.runner import run_scenario
 from twin.exceptions import WorkspaceError
 from twin.mechanism import Mechanism
@@ -101,7 +107,7 @@ def test_unreachable_workspace_centre_raises():
 
 @pytest.mark.accuracy
 def test_optimal_poses_scenario_quick(tmp_path):
-    text = (ROOT / "scenarios/optimal_poses.toml").read_text()
+    text = (ROOT / "scenarios/studies/optimal_poses/optimal_poses.toml").read_text()
     text = text.replace("noise_draws = 100", "noise_draws = 2")
     text = text.replace("random_starts = 30 ", "random_starts = 2 ")
     text = text.replace('values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/')

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from recording_faces import CHECKED, Readback, assert_every_face_has_data, blueprint
 
-from scenarios.recording import Recorder, error_colors
-from scenarios.recording_blueprints import SecondTimeline
-from scenarios.recording_targets import arrow_scale, label_positions
-from twin.kinematics import forward
+from scenarios.recording.blueprints import SecondTimeline
+from scenarios.recording.parts import error_colors
+from scenarios.recording.recorder import Recorder
+from scenarios.recording.targets import arrow_scale, label_positions
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent

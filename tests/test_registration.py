@@ -8,18 +8,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
-from calib.prior import Prior, PriorSpec, collinear_groups, weakly_identified
-from calib.registration import (
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
+from calib.fit.prior import Prior, PriorSpec, collinear_groups, weakly_identified
+from calib.fit.registration import (
     Registration,
     RegistrationError,
     initial_registration,
     registration_jacobian,
 )
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
 from twin.rotations import matrix_from_rotvec
 from twin.tracker import Tracker, TrackerNoise
 

@@ -27,7 +27,7 @@ from fault_fs import (
 
 from scenarios import results_folder, runner
 from scenarios.__main__ import main as cli
-from scenarios.recording import Recorder
+from scenarios.recording.recorder import Recorder
 from scenarios.results_folder import recover, replaced_whole
 from scenarios.runner import run_scenario
 
@@ -304,7 +304,7 @@ def test_immutable_results_folder_exits_2(earlier, tmp_path, monkeypatch, capsys
 def test_recording_on_a_full_disk_raises_instead_of_hanging(tmp_path, monkeypatch):
     """The .rrd is written by Python (rerun encodes it in memory): a full disk is an
     OSError like any other, not a stalled rerun writer thread."""
-    from calib import atomic_files
+    import common.atomic_files as atomic_files
 
     def full(*args, **kwargs):
         raise os_error(ENOSPC)
@@ -323,7 +323,7 @@ def test_recording_on_a_real_full_disk_exits_instead_of_hanging(tmp_path):
     """The case that hung for over 600 s: rerun's writer after "No space left on device"."""
     mount = tmp_path / "disk"
     script = (
-        "import sys\nfrom scenarios.recording import Recorder\n"
+        "import sys\nfrom scenarios.recording.recorder import Recorder\n"
         "try:\n    with Recorder(__import__('pathlib').Path(sys.argv[1]), 't') as rec:\n"
         "        for i in range(200):\n            rec.log_text(f'notes/{i}', 'x' * 4000)\n"
         "except OSError as exc:\n    print(exc.strerror, file=sys.stderr)\n    sys.exit(2)\n"

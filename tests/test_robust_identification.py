@@ -13,13 +13,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from calib.diagnosis import default_candidates, diagnose
+from calib.diagnosis.core import default_candidates, diagnose
 from calib.estimators.levenberg_marquardt import reweighted_levenberg_marquardt
 from calib.exceptions import CalibError, TooManyOutliersError
-from calib.identify import Observations, Rejection, RobustOptions, identify, robust_scale
-from calib.model import CalibrationModel
-from calib.robust import suspect_outliers
-from twin.kinematics_batch import forward_batch
+from calib.fit.identification import Rejection, RobustOptions, identify, robust_scale
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
+from calib.fit.robust import suspect_outliers
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 from twin.workspace import random_poses
 

@@ -20,12 +20,12 @@ from scenarios.config import REPO_ROOT, SCENARIO_DIR, SCHEMAS, ScenarioError, lo
 from scenarios.runner import STUDIES, run_scenario
 from twin.exceptions import WorkspaceError
 
-HEX = "hexapod_paper.toml"
-UND = "undeclared_effect.toml"
-LIU = "liu_vs_ols.toml"
-LIU_GEO = "liu_vs_ols_geometry.toml"
-POL = "polisher_identifiability.toml"
-OPT = "optimal_poses.toml"
+HEX = "studies/hexapod_paper/hexapod_paper.toml"
+UND = "studies/undeclared_effect/undeclared_effect.toml"
+LIU = "studies/liu_vs_ols/liu_vs_ols.toml"
+LIU_GEO = "studies/liu_vs_ols/liu_vs_ols_geometry.toml"
+POL = "studies/polisher_identifiability/polisher_identifiability.toml"
+OPT = "studies/optimal_poses/optimal_poses.toml"
 TRUTH = SCENARIO_DIR / "truth" / "hexapod_table2.toml"
 
 
@@ -201,7 +201,9 @@ def test_file_name_must_give_a_plain_name_without_a_name_key(tmp_path):
     assert load_scenario(str(path)).name == "ab"
 
 
-@pytest.mark.parametrize("path", sorted(SCENARIO_DIR.glob("*.toml")), ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "path", sorted(SCENARIO_DIR.glob("studies/*/*.toml")), ids=lambda p: p.stem
+)
 def test_committed_scenarios_load_and_validate(path):
     scenario = load_scenario(str(path))
     assert scenario.study in SCHEMAS and scenario.study in STUDIES

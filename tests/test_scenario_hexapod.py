@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from recording_faces import assert_every_face_has_data
 
-from calib.dataset import read_dataset
+from calib.data import read_dataset
 from scenarios.__main__ import main as cli
 from scenarios.config import ScenarioError, load_scenario
 from scenarios.runner import run_scenario
@@ -104,7 +104,7 @@ def test_scenario_errors_name_the_cause(tmp_path):
     with pytest.raises(ScenarioError, match="unknown study 'nonexistent'"):
         run_scenario(str(p), tmp_path, quiet=True)
     text = (
-        (ROOT / "scenarios/hexapod_paper.toml")
+        (ROOT / "scenarios/studies/hexapod_paper/hexapod_paper.toml")
         .read_text()
         .replace('values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/')
     )
@@ -128,7 +128,7 @@ def test_cli_reports_scenario_errors(capsys):
 @pytest.mark.accuracy
 def test_other_truth_draws(tmp_path):
     """A seeded random truth (the paper's "errors within +-1 mm") instead of Table 2."""
-    text = (ROOT / "scenarios/hexapod_paper.toml").read_text()
+    text = (ROOT / "scenarios/studies/hexapod_paper/hexapod_paper.toml").read_text()
     text = text.replace('values_file = "truth/hexapod_table2.toml"', "")
     text = text.replace(
         "[pose_noise]",

@@ -1,6 +1,7 @@
 """CI accuracy gates of the main scenario (issue: liu_vs_ols) and its summary contract.
 
-The scenario's truth is the paper's experiment regime (scenarios/liu_vs_ols.toml): the rows
+The scenario's truth is the paper's experiment regime
+(scenarios/studies/liu_vs_ols/liu_vs_ols.toml): the rows
 that do not depend on the estimator, coarse and OLS, must come out as the paper's Table 5
 (position max and mean within the factor the scenario states, all three layers), and the
 loop (diagnosis, the named effect modelled, refit, compensation) below the OLS row.
@@ -18,10 +19,9 @@ from recording_faces import assert_every_face_has_data
 from calib.estimators.liu_cv import LiuCV, _folds
 from calib.estimators.ols import OLS
 from scenarios.config import load_scenario
-from scenarios.liu_vs_ols import POSITION_FACTOR, paper_match
-from scenarios.liu_vs_ols_draws import aggregate
-from scenarios.liu_vs_ols_pipeline import PAPER
 from scenarios.runner import run_scenario
+from scenarios.studies.liu_vs_ols.draws import aggregate
+from scenarios.studies.liu_vs_ols.pipeline import PAPER, POSITION_FACTOR, paper_match
 
 STATS = ("pos_max_mm", "pos_mean_mm", "ori_max_deg", "ori_mean_deg")
 
@@ -253,7 +253,7 @@ def test_draw_study_records_the_distribution_of_liu_minus_ols(tmp_path):
     """Two draws in this process: the report's figure (estimator - OLS over the draws) is a
     view of the recording, and every view has data."""
     root = Path(__file__).resolve().parent.parent
-    text = (root / "scenarios" / "liu_vs_ols_draws.toml").read_text()
+    text = (root / "scenarios" / "studies" / "liu_vs_ols" / "liu_vs_ols_draws.toml").read_text()
     for old, new in (("n = 100", "n = 2"), ('engine = "ray"', 'engine = "local"')):
         assert old in text, old
         text = text.replace(old, new)

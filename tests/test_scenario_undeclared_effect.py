@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from recording_faces import Readback, assert_every_face_has_data
 
-from calib.__main__ import main as calib_cli
+from calib.cli.commands import main as calib_cli
 from scenarios.runner import run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -128,7 +128,7 @@ def test_an_effects_plot_isolates_it():
 def test_unknown_effect_in_a_scenario_is_named(tmp_path):
     from scenarios.config import ScenarioError
 
-    text = (ROOT / "scenarios/undeclared_effect.toml").read_text()
+    text = (ROOT / "scenarios/studies/undeclared_effect/undeclared_effect.toml").read_text()
     text = text.replace('kind = "lead_error_harmonic"', 'kind = "creep"').replace(
         'values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/'
     )

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.kinematics_batch import forward_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity import target_jacobian
+from twin.kinematics.sensitivity_batch import JacobianPlan, target_jacobian_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
-from twin.sensitivity import target_jacobian
-from twin.sensitivity_batch import JacobianPlan, target_jacobian_batch
 from twin.workspace import random_poses
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -50,7 +50,7 @@ def test_batch_equals_per_pose(name):
 def test_compiled_kernel_equals_numpy_path(name, monkeypatch):
     """The compiled kernel (frames, screws, explicit and implicit terms pose by pose) and
     the numpy path (arrays over poses) give one Jacobian to round-off."""
-    from twin import sensitivity_batch
+    import twin.kinematics.sensitivity_batch as sensitivity_batch
 
     _, params, values, mech, qpos = _machine(name, 70, 5, 2e-3, 0.8)
     compiled = target_jacobian_batch(mech, params, values, qpos)
@@ -82,7 +82,9 @@ def test_adjoint_with_static_pivots_refused_equals_per_pose(name, refused, monke
     system: the Jacobian stays the per-pose one. No pose within the machines' strokes is
     ill-conditioned enough to refuse a pivot, so the refusal is forced: for every system, or
     for every other one (static and Householder systems side by side in one batch)."""
-    from twin import kinematics_reduced, sensitivity_batch, small_systems
+    import twin.kinematics.reduced as kinematics_reduced
+    import twin.kinematics.sensitivity_batch as sensitivity_batch
+    import twin.kinematics.small_systems as small_systems
 
     nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
     params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
@@ -111,6 +113,6 @@ def test_adjoint_with_static_pivots_refused_equals_per_pose(name, refused, monke
 
 
 def _closure(mech: Mechanism):
-    from twin.kinematics_fast import fast_kinematics
+    from twin.kinematics.structure import fast_kinematics
 
     return fast_kinematics(mech).closure

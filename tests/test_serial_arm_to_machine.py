@@ -10,10 +10,10 @@ import json
 import pytest
 from to_machine_support import MODELS
 
-from calib.__main__ import main as calib_main
+from calib.cli.commands import main as calib_main
 from scenarios.runner import run_scenario
-from twin.error_model import main as error_model_main
-from twin.from_urdf import main as from_urdf_main
+from twin.formats.error_model import main as error_model_main
+from twin.formats.from_urdf import main as from_urdf_main
 
 
 @pytest.fixture(scope="module")

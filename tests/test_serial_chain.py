@@ -11,15 +11,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
 from twin.exceptions import ModelError
-from twin.kinematics import forward, inverse
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.sensitivity import target_jacobian
+from twin.kinematics.single_pose import forward, inverse
 from twin.mechanism import Mechanism
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import rpy_from_matrix
-from twin.sensitivity import target_jacobian
 
 L1, L2, L3 = 0.35, 0.30, 0.12
 

@@ -1,4 +1,4 @@
-"""The vectorised small-system solvers (twin.small_systems) against numpy.linalg.
+"""The vectorised small-system solvers (twin.kinematics.small_systems) against numpy.linalg.
 
 On stacks of random well-conditioned and ill-conditioned systems (condition numbers up to
 1e8, rows deliberately badly ordered so that static pivots are refused and Householder takes
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twin.small_systems import (
+from twin.kinematics.small_systems import (
     back_substitute,
     eliminate,
     eliminate_static,

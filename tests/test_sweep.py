@@ -11,9 +11,9 @@ from recording_faces import assert_every_face_has_data
 from sweep_support import QUICK, figures_off
 
 from scenarios.config import ScenarioError, load_scenario
-from scenarios.sweep import sweep
-from scenarios.sweep_aggregate import flatten_numbers, statistics
-from scenarios.sweep_settings import overridden, parse_set, parse_value, plan_runs, run_seeds
+from scenarios.sweep.aggregate import flatten_numbers, statistics
+from scenarios.sweep.runner import sweep
+from scenarios.sweep.settings import overridden, parse_set, parse_value, plan_runs, run_seeds
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -67,7 +67,7 @@ def test_statistics_and_flattening():
 
 
 def _random_truth_copy(tmp_path: Path) -> Path:
-    text = (ROOT / "scenarios/undeclared_effect.toml").read_text()
+    text = (ROOT / "scenarios/studies/undeclared_effect/undeclared_effect.toml").read_text()
     text = text.replace(
         'values_file = "truth/hexapod_table2.toml"',
         "random = { translation_mm = 0.3 }",

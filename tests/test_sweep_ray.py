@@ -8,7 +8,7 @@ import json
 import pytest
 from sweep_support import QUICK, figures_off, numbers
 
-from scenarios.sweep import sweep
+from scenarios.sweep.runner import sweep
 
 
 @pytest.mark.accuracy

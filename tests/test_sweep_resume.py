@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from sweep_support import figures_off, numbers
 
-from scenarios.sweep import sweep
+from scenarios.sweep.runner import sweep
 
 
 @pytest.mark.accuracy

@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin import sensitivity_batch
-from twin.kinematics_batch import forward_batch
-from twin.kinematics_fast import fast_kinematics
-from twin.kinematics_inverse_batch import actuator_joint_parameters, actuator_twist_jacobians
+import twin.kinematics.sensitivity_batch as sensitivity_batch
+from twin.formats.parameter_file import load_parameter_set
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.inverse_batch import actuator_joint_parameters, actuator_twist_jacobians
+from twin.kinematics.sensitivity import tool_twist_jacobian
+from twin.kinematics.sensitivity_batch import JacobianPlan, tool_twist_jacobian_batch
+from twin.kinematics.structure import fast_kinematics
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set
-from twin.sensitivity import tool_twist_jacobian
-from twin.sensitivity_batch import JacobianPlan, tool_twist_jacobian_batch
 from twin.workspace import random_poses
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -68,7 +68,7 @@ def test_actuator_joints_equal_per_pose(name):
 
 
 def test_chunks_join_in_pose_order(monkeypatch):
-    from twin import sensitivity_compiled
+    import twin.kinematics.sensitivity_compiled as sensitivity_compiled
 
     _, params, values, mech, qpos = _machine("hexapod_rrrprr", 10, 3)
     whole = tool_twist_jacobian_batch(mech, params, values, qpos)
@@ -106,7 +106,9 @@ def test_least_squares_closure_equals_per_pose():
 def test_adjoint_with_static_pivots_refused_equals_per_pose(name, monkeypatch):
     """Every static pivot refused (Householder in the adjoint solve, as for an ill-conditioned
     pose): the Jacobian stays the per-pose one."""
-    from twin import kinematics_reduced, sensitivity_batch, small_systems
+    import twin.kinematics.reduced as kinematics_reduced
+    import twin.kinematics.sensitivity_batch as sensitivity_batch
+    import twin.kinematics.small_systems as small_systems
 
     _, params, values, mech, qpos = _machine(name, 8, 4)
     per_pose = np.array([tool_twist_jacobian(mech, params, values, q) for q in qpos])

@@ -12,15 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib.__main__ import main
-from calib.dataset import Dataset, write_dataset
+from calib.cli.commands import main
+from calib.data import Dataset, write_dataset
 from calib.estimators.levenberg_marquardt import LMOptions, levenberg_marquardt
-from calib.identify import Observations, identify
-from calib.model import CalibrationModel
-from calib.registration import Registration, about, about_jacobian, identity
-from twin.kinematics_batch import forward_batch
+from calib.fit.identification import identify
+from calib.fit.model import CalibrationModel
+from calib.fit.observations import Observations
+from calib.fit.registration import Registration, about, about_jacobian, identity
+from twin.formats.parameter_file import load_parameter_set, load_values
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.rotations import matrix_from_rotvec
 from twin.tracker import Tracker
 from twin.workspace import random_poses

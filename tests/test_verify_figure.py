@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib.position_error import stats_mm
-from calib.verify import Side, Verification
-from calib.verify_figure import LABELLED_POSES, WORST, save_verification_png, verification_figure
+from calib.cli.verify_figure import (
+    LABELLED_POSES,
+    WORST,
+    save_verification_png,
+    verification_figure,
+)
+from calib.fit.position_error import stats_mm
+from calib.fit.verify import Side, Verification
 
 
 def _verification(n: int, seed: int = 0) -> tuple[Verification, np.ndarray]:

@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from fault_fs import ENOSPC, in_small_fs, os_error
 
-from calib import write_set as write_set_module
-from calib.__main__ import main
-from calib.dataset import write_dataset
-from calib.write_set import WriteSetError, write_files
+import common.write_set as write_set_module
+from calib.cli.commands import main
+from calib.data import write_dataset
+from common.write_set import WriteSetError, write_files
 from scenarios.twin_datasets import measured_dataset
+from twin.formats.parameter_file import load_parameter_set, load_values
 from twin.mechanism import Mechanism
-from twin.parameter_file import load_parameter_set, load_values
 from twin.tracker import Tracker, TrackerNoise
 from twin.workspace import random_poses
 
@@ -171,7 +171,7 @@ def test_out_that_would_overwrite_an_input_is_refused_first(files, capsys, comma
 
 def test_staged_files_go_in_as_a_set_or_not_at_all(tmp_path):
     """What a sweep's aggregate (figures, recording, summary, report) is written through."""
-    from calib.write_set import STAGE_PREFIX, staged
+    from common.write_set import STAGE_PREFIX, staged
 
     (tmp_path / "summary.json").write_text("previous\n")
     with (
@@ -192,7 +192,7 @@ def test_staged_files_go_in_as_a_set_or_not_at_all(tmp_path):
 
 
 def test_sweep_on_a_full_disk_exits_2(tmp_path, monkeypatch, capsys):
-    from scenarios import sweep as sweep_module
+    import scenarios.sweep.runner as sweep_module
     from scenarios.__main__ import main as scenarios_main
 
     def full(*args, **kwargs):
@@ -206,8 +206,9 @@ def test_sweep_on_a_full_disk_exits_2(tmp_path, monkeypatch, capsys):
 
 
 def test_dh_table_on_a_full_disk_writes_neither_file(tmp_path, monkeypatch, capsys):
-    """``python -m twin.dh_table --out-dir``: the MJCF and its error model, both or neither."""
-    from twin.dh_table import main as dh_main
+    """``python -m twin.formats.dh_table --out-dir``: the MJCF and its error model, both or
+    neither."""
+    from twin.formats.dh_table import main as dh_main
 
     real = write_set_module._temporary
 

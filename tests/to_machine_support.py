@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.registration import Registration
-from calib.result_file import write_result
+from calib.data.result_file import write_result
+from calib.fit.registration import Registration
 from twin.parameters import Parameter, ParameterSet
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -23,8 +23,8 @@ from twin.effects.base import (
     target_offsets,
     tracker_with,
 )
-from twin.kinematics import check_commands
-from twin.kinematics_batch import forward_batch
+from twin.kinematics.batch import forward_batch
+from twin.kinematics.single_pose import check_commands
 from twin.mechanism import Mechanism
 from twin.tracker import PoseNoise, Tracker
 

@@ -16,12 +16,13 @@ A parameter is one scalar deviation from the nominal MJCF, of one of five kinds:
   masses plus m kilograms at the tool site and ``k`` a compliance (rad/(N m), m/N; files
   deg/(kN m), mm/kN); without it, the load of one kilogram at the tool site alone and ``k``
   the compliance times the payload's mass (per kg: the units times kg), what a model without
-  declared masses can know. The calibration model computes the loads (calib.joint_compliance).
+  declared masses can know. The calibration model computes the loads (calib.fit.joint_compliance).
 
 The first four are geometry; a gain or a compliance acts on the commands, not on the model:
 injection leaves it out, its screw is zero and it moves no site at a given configuration (its
 identification columns come from the calibration model, which maps commands to joint values
-through it). The Jacobians of twin.sensitivity and twin.sensitivity_batch refuse it.
+through it). The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch
+refuse it.
 
 Values are SI (metres, radians, gains as plain numbers, compliances in rad/(N m) or m/N).
 Injection edits ``body_pos``, ``body_quat``, ``site_pos``, ``qpos0`` of a copy of the nominal
@@ -325,7 +326,7 @@ class ParameterSet:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`screws` for N poses at once, each (3, n, N), from frames with the poses
         last: ``xpos`` (3, nbody, N), ``xmat`` (3, 3, nbody, N), ``xanchor`` and ``xaxis``
-        (3, njnt, N) (twin.kinematics_tree.TreeFrames)."""
+        (3, njnt, N) (twin.kinematics.tree.TreeFrames)."""
         n_pose, n = xpos.shape[-1], len(self)
         t, w, o = (np.zeros((3, n, n_pose)) for _ in range(3))
         kind, el, axis = self.kind, self.element, self.axis
@@ -426,7 +427,7 @@ def require_geometry(params: ParameterSet, what: str) -> None:
         names = [params.names[k] for k in np.flatnonzero(~params.is_geometric)]
         raise ParameterError(
             f"{what} takes geometric parameters only; {names[:3]} are actuator gains or joint "
-            "compliances, which act through the commands (calib.model.CalibrationModel adds "
+            "compliances, which act through the commands (calib.fit.model.CalibrationModel adds "
             "their columns)"
         )
 

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from twin.exceptions import ClosureError, WorkspaceError
-from twin.kinematics import inverse
+from twin.kinematics.single_pose import inverse
 from twin.mechanism import Mechanism
 
 AXES = ("x", "y", "z", "rx", "ry", "rz")

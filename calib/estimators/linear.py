@@ -19,7 +19,7 @@ from typing import Protocol
 
 import numpy as np
 
-from calib.identifiability import RANK_RTOL
+from calib.analysis.identifiability import RANK_RTOL
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,7 @@ def prepare(h: np.ndarray, y: np.ndarray | None = None, many: bool = False) -> S
     if s[-1] <= RANK_RTOL * s[0]:
         raise ValueError(
             f"H is rank deficient (rank {int(np.sum(s > RANK_RTOL * s[0]))} of {m} columns): "
-            "reconstruct an identifiable set first (calib.reconstruction)"
+            "reconstruct an identifiable set first (calib.analysis.reconstruction)"
         )
     return Scaled(hs, scale, u, s, vt)
 

@@ -16,7 +16,7 @@ from calib.estimators.ridge import Ridge
 ESTIMATORS: dict[str, Callable[..., Estimator]] = {
     "ols": OLS,
     "liu": Liu,
-    "liu_paper": LiuPaperUnits,  # needs is_angle (calib.fine passes it)
+    "liu_paper": LiuPaperUnits,  # needs is_angle (calib.two_step.fine passes it)
     "liu_cv": LiuCV,  # k and d by cross-validation over the calibration poses
     "ridge": Ridge,
     "pcr": PCR,

@@ -16,6 +16,10 @@ from twin.effects.base import (
     ReadingEffect,
     TargetEffect,
     apply_actuator_effects,
+    check_effects,
+    model_at,
+    target_offsets,
+    tracker_with,
 )
 from twin.effects.encoder_eccentricity import EncoderEccentricity
 from twin.effects.gravity_compliance import GravityCompliance
@@ -47,4 +51,8 @@ __all__ = [
     "ThermalWarmup",
     "TrackerAirTemperature",
     "apply_actuator_effects",
+    "check_effects",
+    "model_at",
+    "target_offsets",
+    "tracker_with",
 ]

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.closure import closure_jacobian, update_kinematics
 from twin.exceptions import ModelError
-from twin.kinematics import forward
+from twin.kinematics.closure import closure_jacobian, update_kinematics
+from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
 
 

@@ -1,0 +1,103 @@
+"""What the command line's subcommands share: option types, the fit, the verdict's print."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from calib.data import read_dataset
+from calib.fit import (
+    EXIT_BAD_INPUT,
+    EXIT_POOR_FIT,
+    MAX_SIGMA_MM,
+    CalibrationRun,
+    FitFailed,
+    PriorSpec,
+    Verdict,
+    calibrate,
+    model_from_files,
+)
+from calib.loop import extended_model, load_effect
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (NaN, inf, 0 and negatives are refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return value
+
+
+def sigma_float(text: str) -> float:
+    """argparse type: a tracker accuracy in mm, finite, > 0 and at most MAX_SIGMA_MM."""
+    value = positive_float(text)
+    if value > MAX_SIGMA_MM:
+        raise argparse.ArgumentTypeError(
+            f"{value:g} mm is beyond {MAX_SIGMA_MM:g} mm: no measuring system of a machine is "
+            "that coarse (the value is in millimetres per coordinate)"
+        )
+    return value
+
+
+def ratio_float(text: str) -> float:
+    value = positive_float(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return value
+
+
+def prior_spec(text: str) -> PriorSpec:
+    try:
+        return PriorSpec.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def print_verdict(verdict: Verdict) -> None:
+    stream = sys.stdout if verdict.ok else sys.stderr
+    print(verdict.message, file=stream)
+    for hint in verdict.hints:
+        print(f"  likely cause: {hint}", file=stream)
+
+
+def failed(exc: FitFailed) -> int:
+    print(f"FAILED: {exc}", file=sys.stderr)
+    for hint in exc.hints:
+        print(f"  likely cause: {hint}", file=sys.stderr)
+    return EXIT_POOR_FIT if exc.poor_data else EXIT_BAD_INPUT
+
+
+def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
+    model = model_from_files(args.model, args.errors)
+    effect = getattr(args, "with_effect", None)
+    if effect:  # the effect a diagnosis named, as parameters of the error model
+        model = extended_model(model, load_effect(effect, model)["added_parameters"], effect)
+    dataset = read_dataset(args.data, expected_model=model.nominal.name)
+    try:
+        return calibrate(
+            model,
+            dataset,
+            set_name=args.set,
+            sigma_mm=args.sigma_mm,
+            max_ratio=args.max_ratio,
+            max_iterations=args.max_iterations,
+            unidentifiable="raise" if getattr(args, "require_all", False) else "fix",
+            prior_spec=getattr(args, "prior_std", None),
+            regularise=not getattr(args, "plain", False),
+        )
+    except FitFailed as exc:
+        return failed(exc)

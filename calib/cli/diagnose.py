@@ -1,0 +1,197 @@
+"""``python -m calib diagnose``: what geometry leaves, tested for the effects it lacks."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from calib.cli.common import print_verdict, run_fit
+from calib.data import DatasetError, read_dataset, select_set, subset
+from calib.fit import EXIT_OK, CalibrationRun, rejected_rows
+from calib.loop import effect_content
+from common.atomic_files import json_text
+from common.write_set import write_files
+
+
+def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[object, str] | None:
+    """The held-out rows for the diagnosis and a sentence saying which: ``--test-set NAME``
+    of ``--test FILE`` (or of ``--data``); ``--test FILE`` alone: its 'test' rows if it has
+    any, else the rows of the ``--data`` file not fitted, else all of FILE. None without
+    either option."""
+    if not args.test and not args.test_set:
+        return None
+    same = not args.test or Path(args.test).resolve() == Path(args.data).resolve()
+    path = args.data if same else args.test
+    ds = read_dataset(path, expected_model=run.model.nominal.name)
+    sets = [str(s) for s in ds.sets]
+    if args.test_set:
+        picked, sentence = select_set(ds, args.test_set, "the diagnosis's test")
+    elif "test" in sets:
+        picked, sentence = select_set(ds, "test", "the diagnosis's test")
+    elif same:
+        fitted = {int(p) for p in run.dataset.pose_ids.tolist()}
+        mask = np.array([int(p) not in fitted for p in ds.pose_ids.tolist()])
+        if not mask.any():
+            raise DatasetError(
+                f"{path}: every pose was fitted; mark held-out rows in the set column and "
+                "give --test-set NAME, or give --test FILE with other poses"
+            )
+        picked = subset(ds, mask)
+        sentence = f"{picked.n_poses} poses of {path} not fitted used as the diagnosis's test"
+    else:
+        picked, sentence = ds, f"all {ds.n_poses} poses of {path} used as the diagnosis's test"
+    if same:
+        fitted = {int(p) for p in run.dataset.pose_ids.tolist()}
+        both = sorted(fitted & {int(p) for p in picked.pose_ids.tolist()})
+        if both:
+            raise DatasetError(
+                f"{len(both)} test pose(s) were also fitted (pose_id {both[0]}"
+                f"{' ...' if len(both) > 1 else ''}): a held-out set must hold other poses"
+            )
+    return picked, sentence
+
+
+def _diagnosis_test_set(args: argparse.Namespace, run: CalibrationRun):
+    """The held-out rows as a TestSet in the base frame (through the calibration's
+    registration for tracker-frame data), and the sentence saying which; (None, "")."""
+    from calib.diagnosis import TestSet
+    from calib.fit import bind_dataset
+
+    held = _held_out_rows(args, run)
+    if held is None:
+        return None, ""
+    ds, sentence = held
+    obs = bind_dataset(run.model.nominal, ds)
+    if obs.frame != run.obs.frame:
+        raise DatasetError(
+            f"the test data is in the '{obs.frame}' frame but the calibration data in "
+            f"'{run.obs.frame}'"
+        )
+    measured = obs.measured
+    if run.result.registration is not None:
+        measured = run.result.registration.to_base(measured)
+    test = TestSet(
+        obs.commands,
+        measured,
+        None if ds.order is None else np.asarray(ds.order),
+        None if ds.time_s is None else np.asarray(ds.time_s),
+    )
+    return test, sentence
+
+
+def _typed_sigma_mm(args: argparse.Namespace, run: CalibrationRun) -> float | None:
+    if args.sigma_mm is not None:
+        return args.sigma_mm
+    sigma = (run.dataset.tracker or {}).get("sigma_mm")
+    return None if sigma is None else float(sigma)
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    from calib.diagnosis import diagnose
+
+    run = run_fit(args)
+    if isinstance(run, int):
+        return run
+    print(run.selection)
+    if not run.verdict.ok:  # only what a user must fix: data errors, no convergence
+        print(
+            "the geometric fit the diagnosis starts from is not usable; fix the data first",
+            file=sys.stderr,
+        )
+        print_verdict(run.verdict)
+        return run.verdict.exit_code
+    print(f"geometric fit: {run.verdict.message}")
+    head = (run.dataset.tracker or {}).get("position_mm")
+    obs = run.obs
+    if run.result.registration is not None:  # the diagnosis works in the base frame
+        obs = replace(obs, measured=run.result.registration.to_base(obs.measured), frame="base")
+    test, test_sentence = _diagnosis_test_set(args, run)
+    if test_sentence:
+        print(test_sentence)
+    elif "test" in {str(x) for x in read_dataset(args.data).sets} and args.set != "test":
+        print("note: the data's 'test' rows were not used; --test-set test holds them out")
+    typed = _typed_sigma_mm(args, run)
+    ds = run.dataset
+    if typed is None and ds.n_repeats < 2:
+        raise DatasetError(
+            "no noise level: give --sigma-mm, a sidecar tracker.sigma_mm, or data with repeats"
+        )
+    diag = diagnose(
+        run.model,
+        obs,
+        run.result,
+        None if typed is None else typed * 1e-3,
+        order=ds.order,
+        time_s=ds.time_s,
+        repeat_std_m=ds.repeat_std if ds.n_repeats > 1 else None,
+        n_repeats=ds.n_repeats,
+        tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
+        test=test,
+        registration=run.result.registration is not None,
+    )
+    noise = diag.noise.as_dict() if diag.noise is not None else {}
+    print(
+        f"geometric residual {diag.residual_rms_mm:.4f} mm RMS per coordinate; noise "
+        f"{diag.noise_floor_rms_mm:.4f} mm per coordinate ({noise.get('source', 'typed')}); "
+        f"chi-square p = {diag.chi2_p_value:.3g}"
+    )
+    print(f"diagnosis: {diag.chosen} ({diag.reason})")
+    for note in diag.notes:
+        print(f"  note: {note}")
+    for name, entry in diag.effect_parameters.items():
+        for pname, v in entry.items():
+            std = "" if v["std"] is None else f" +- {v['std']:.3g}"
+            value = v["value"] if isinstance(v["value"], str) else f"{v['value']:.4g}"
+            print(f"  {name}: {pname} = {value}{std} {v['unit']}")
+    for name, score in diag.scores.items():
+        tail = "" if score.test_rms_mm is None else f", test RMS {score.test_rms_mm:.5f} mm (3D)"
+        refused = f"  REFUSED: {score.refused}" if score.refused else ""
+        print(
+            f"  {name:24s} held-out RMS blocked {score.heldout_blocked_mm:.5f} / random "
+            f"{score.heldout_random_mm:.5f} mm{tail}{refused}"
+        )
+    if diag.test is not None:
+        for side in ("before", "after"):
+            t = diag.test[side]
+            print(
+                f"test {side:6s}: 3D position error per reading RMS {t['rms_mm']:.4f} mm, "
+                f"mean {t['mean_mm']:.4f} mm, max {t['max_mm']:.4f} mm"
+            )
+    if args.out:
+        out = Path(args.out)
+        content = {
+            "model": run.model.nominal.name,
+            "residual": run.residual,
+            "residual_rms_mm_per_coordinate": diag.residual_rms_mm,
+            "noise_floor_rms_mm_per_coordinate": diag.noise_floor_rms_mm,
+            "noise": noise,
+            "chi2_p_value": diag.chi2_p_value,
+            "diagnosed_effect": diag.chosen,
+            "reason": diag.reason,
+            "notes": list(diag.notes),
+            "rejected": rejected_rows(run),
+            "candidates": {n: s.heldout_rms_mm for n, s in diag.scores.items()},
+            "heldout_rms_mm_per_coordinate": diag.heldout,
+            "refused": {n: s.refused for n, s in diag.scores.items() if s.refused},
+            "effect_parameters": diag.effect_parameters,
+            "residual_structure": diag.structure_detail,
+            "metric": "3D position error per reading |p_measured - p_model| (mm)",
+            "effect": effect_content(run.model, diag.chosen, diag.effect_parameters),
+        }
+        if diag.test is not None:
+            content["test"] = {
+                side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
+                for side in ("before", "after")
+            }
+        files: dict = {}
+        if diag.plot is not None:
+            from calib.diagnosis import save_diagnosis_png
+
+            content["figure"] = str(out.with_suffix(".png"))
+            files[out.with_suffix(".png")] = lambda tmp: save_diagnosis_png(diag, tmp)
+        write_files({out: json_text(content), **files}, make_parents=True)  # both, or neither
+    return EXIT_OK

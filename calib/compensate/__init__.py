@@ -1,0 +1,29 @@
+"""The identified machine put to use: commands that reach desired poses (compensation)
+and the calibrated model as files for a controller or simulator (export)."""
+
+from common.face import face
+
+__all__, __getattr__, __dir__ = face(
+    __name__,
+    {
+        "compensation": (
+            "TwistCompensation",
+            "reachable_compensated_commands",
+        ),
+        "identified_machine": (
+            "IdentifiedMachine",
+            "load_identified_machine",
+        ),
+        "model_export": (
+            "FK_TOLERANCE_M",
+            "export_model",
+            "gains_text",
+            "kinematics_difference",
+        ),
+        "poses": (
+            "Compensation",
+            "compensate",
+            "solve_each",
+        ),
+    },
+)

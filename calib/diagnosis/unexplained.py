@@ -1,0 +1,140 @@
+"""Structure no physical candidate explains: rank correlations and a kernel correction.
+
+When no candidate lowers the held-out error, the residual is still tested for structure:
+Spearman rank correlation of each pose's residual size with tool position, tool orientation,
+each actuator and the measurement order; and a non-parametric correction (Nadaraya-Watson
+kernel smoothing of the residual vector over one group of pose variables, bandwidth by
+leave-one-out on the training poses) is tried on held-out poses. If it lowers the held-out
+error the answer is "unexplained: correlated with <group>", not a wrong effect and not "none".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib.analysis.rank_structure import rank_correlations
+from calib.diagnosis.context import Context
+from calib.diagnosis.problem import Problem
+from twin.rotations import rotvec_from_matrix
+
+BANDWIDTHS = (0.15, 0.3, 0.6, 1.2, 2.5)
+
+
+def _stats():
+    from scipy import stats  # lazy: scipy.stats costs about 1 s at import
+
+    return stats
+
+
+def features(ctx: Context) -> dict[str, np.ndarray]:
+    """Groups of pose variables (N, d): where, how turned, which commands, when."""
+    mean_r = ctx.tool_rotation.mean(axis=0)
+    u, _, vt = np.linalg.svd(mean_r)
+    mean_r = u @ vt
+    turn = rotvec_from_matrix(ctx.tool_rotation @ mean_r.T)
+    return {
+        "tool position": ctx.targets.mean(axis=1),
+        "tool orientation": np.atleast_2d(turn).reshape(len(turn), 3),
+        "actuator commands": ctx.commands,
+        "measurement order": ctx.time[:, None],
+    }
+
+
+def structure_detail(r: np.ndarray, keep: np.ndarray, ctx: Context) -> dict[str, dict[str, float]]:
+    """Spearman rho and p of the per-pose residual size with every pose variable."""
+    count = np.maximum(keep.sum(axis=1), 1)
+    size = np.sqrt(np.sum(np.where(keep, r, 0.0) ** 2, axis=1) / count)
+    f = features(ctx)
+    probes = {}
+    for i, c in enumerate("xyz"):
+        probes[f"tool {c}"] = f["tool position"][:, i]
+        probes[f"tool r{c}"] = f["tool orientation"][:, i]
+    for i, n in enumerate(ctx.actuator_names):
+        probes[n] = ctx.commands[:, i]
+    probes["order"] = ctx.time
+    return rank_correlations(size, probes)
+
+
+def _smooth(x_train, e_train, x_eval, h, exclude_self=False):
+    d2 = np.sum((x_eval[:, None, :] - x_train[None, :, :]) ** 2, axis=2)
+    w = np.exp(-0.5 * d2 / h**2)
+    if exclude_self:
+        np.fill_diagonal(w, 0.0)
+    s = w.sum(axis=1, keepdims=True)
+    s[s == 0] = 1.0
+    return (w @ e_train) / s
+
+
+def kernel_correction(prob: Problem, x: np.ndarray, train: np.ndarray, keep: np.ndarray):
+    """Geometry refit on ``train`` and a kernel smoother of its residual over ``x``:
+    returns a function (poses mask) -> corrected residual (n, R)."""
+    _, gplus = prob.basis(train)
+    _, rt = prob.rows(train)
+    beta = gplus @ rt
+    e_tr = (prob.r[train] - prob.geo[train] @ beta) * keep[train]
+    mu, sd = x[train].mean(axis=0), x[train].std(axis=0)
+    sd[sd == 0] = 1.0
+    z = (x - mu) / sd
+    zt = z[train] / np.sqrt(z.shape[1])
+    best, best_h = np.sum(e_tr**2), None
+    for h in BANDWIDTHS:
+        loo = e_tr - _smooth(zt, e_tr, zt, h, exclude_self=True) * keep[train]
+        sse = float(np.sum(loo**2))
+        if sse < best:
+            best, best_h = sse, h
+
+    def corrected(poses: np.ndarray) -> np.ndarray:
+        e = prob.r[poses] - prob.geo[poses] @ beta
+        if best_h is None:
+            return e
+        return e - _smooth(zt, e_tr, z[poses] / np.sqrt(z.shape[1]), best_h) * keep[poses]
+
+    return corrected, best_h
+
+
+def kernel_heldout(
+    prob: Problem, x: np.ndarray, folds: dict[str, np.ndarray], keep: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Per-pose held-out SSE of geometry + the kernel correction over ``x``, per scheme."""
+    out = {}
+    for scheme, labels in folds.items():
+        sse = np.zeros(len(labels))
+        for f in range(int(labels.max()) + 1):
+            train, test = labels != f, labels == f
+            corrected, _ = kernel_correction(prob, x, train, keep)
+            sse[test] = np.sum(corrected(test) ** 2, axis=1)
+        out[scheme] = sse
+    return out
+
+
+def residual_structure(
+    r: np.ndarray,
+    targets: np.ndarray,
+    commands: np.ndarray,
+    order: np.ndarray,
+    keep: np.ndarray | None = None,
+) -> dict[str, float]:
+    """Spearman rank correlation of each pose's residual size with where and when it was
+    measured: tool position x, y, z (space), mean actuator value (actuator coordinates) and
+    measurement order (time). Values near 0 mean no structure along that direction.
+
+    ``keep`` (same shape as ``r``) marks the rows to use; a pose with none is left out."""
+    keep = np.ones(r.shape, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    count = keep.sum(axis=1)
+    some = count > 0
+    size = np.sqrt(np.sum(np.where(keep, r, 0.0) ** 2, axis=1)[some] / count[some])
+    centre = targets.mean(axis=1)[some]
+    commands = np.asarray(commands)[some]
+    order = np.asarray(order)[some]
+    probes = {
+        "x": centre[:, 0],
+        "y": centre[:, 1],
+        "z": centre[:, 2],
+        "mean_actuator": commands.mean(axis=1),
+        "order": np.asarray(order, dtype=float),
+    }
+    out = {}
+    for name, v in probes.items():
+        rho = _stats().spearmanr(size, v).statistic if np.ptp(v) > 0 else 0.0
+        out[name] = float(np.nan_to_num(rho))
+    return out

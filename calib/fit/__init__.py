@@ -1,0 +1,62 @@
+"""Identification and its judgement: the calibration model, identify (robust, with prior and
+tracker registration), the verdict, verify, and the measured-data workflow that chains them."""
+
+from common.face import face
+
+__all__, __getattr__, __dir__ = face(
+    __name__,
+    {
+        "identification": (
+            "IdentificationResult",
+            "identify",
+        ),
+        "model": (
+            "CalibrationModel",
+            "ColumnJacobian",
+            "Prediction",
+        ),
+        "observations": (
+            "Observations",
+            "bind_dataset",
+            "model_from_files",
+        ),
+        "position_error": (
+            "error_norms",
+            "stats_mm",
+        ),
+        "prior": (
+            "PriorSpec",
+            "correlation_matrix",
+        ),
+        "registration": (
+            "Registration",
+            "RegistrationError",
+            "initial_registration",
+            "rigid_motion_span",
+        ),
+        "verdict": (
+            "DEFAULT_MAX_RATIO",
+            "EXIT_BAD_INPUT",
+            "EXIT_OK",
+            "EXIT_POOR_FIT",
+            "EXIT_UNREACHABLE",
+            "MAX_SIGMA_MM",
+            "Verdict",
+            "implausible_estimates",
+        ),
+        "verify": (
+            "Side",
+            "Verification",
+            "score_side",
+        ),
+        "workflow": (
+            "CalibrationRun",
+            "FitFailed",
+            "calibrate",
+            "regularisation_text",
+            "rejected_rows",
+            "result_content",
+            "verify_result",
+        ),
+    },
+)

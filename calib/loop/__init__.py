@@ -1,0 +1,28 @@
+"""Closing the loop: a diagnosed effect as parameters of the error model (effect kinds),
+refit with the geometry, and compensation through the corrected model."""
+
+from common.face import face
+
+__all__, __getattr__, __dir__ = face(
+    __name__,
+    {
+        "compensation": ("loop_commands",),
+        "effect": (
+            "ActuatorCorrection",
+            "diagnosed_correction",
+        ),
+        "effect_kinds": (
+            "parameter_entry",
+            "EffectFileError",
+            "effect_content",
+            "extended_model",
+            "load_effect",
+            "model_for_result",
+        ),
+        "fit": (
+            "LoopFit",
+            "fit_with_effect",
+            "residual_rms_3d",
+        ),
+    },
+)

@@ -1,0 +1,198 @@
+"""Several files written as one set: all of them, or none (the previous files left in place).
+
+``verify --out v.json`` writes v.json, v.csv and v.png; a reader must never find a new
+v.json beside an old v.png, nor a set cut short by a full disk. :func:`write_set` first
+writes every file to a temporary sibling (where a full disk or a read-only folder fails,
+before anything is replaced), then keeps a hard link (or copy) of each file it will replace,
+then swaps the new files in one by one; if a swap fails, the files already swapped are put
+back from those links (and new ones removed), so the folder holds the previous set.
+
+:func:`staged` serves writers that write files themselves (figures, recordings): they write
+into a hidden staging folder, whose files then go in as one set.
+
+:class:`WriteSetError` (an OSError) names the file and the cause and says that the previous
+files were left as they were.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+
+from common.atomic_files import ordinary_mode
+
+Writer = Callable[[Path], None]
+
+
+class WriteSetError(OSError):
+    """A set of files could not be written; none of them was changed."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def text_writer(text: str) -> Writer:
+    """A writer of UTF-8 ``text`` (no newline translation)."""
+
+    def write(path: Path) -> None:
+        with open(path, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    return write
+
+
+def _cause(exc: OSError) -> str:
+    return exc.strerror or str(exc)
+
+
+def _temporary(target: Path) -> Path:
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    os.close(fd)
+    return Path(tmp)
+
+
+def _backup(target: Path) -> Path | None:
+    """A hidden hard link (else a copy) of ``target`` if it exists, to restore it from."""
+    if not target.exists():
+        return None
+    keep = _temporary(target)
+    keep.unlink()
+    try:
+        os.link(target, keep)
+    except OSError:  # a filesystem without hard links
+        shutil.copy2(target, keep)
+    return keep
+
+
+def write_set(
+    files: Mapping[str | os.PathLike[str], Writer], make_parents: bool = False
+) -> list[Path]:
+    """Write each ``path -> writer(tmp_path)`` of ``files`` as one set (see the module);
+    returns the paths. Raises :class:`WriteSetError` with every file left as it was.
+    ``make_parents`` creates missing folders first (else a missing folder is the error)."""
+    targets = [Path(p) for p in files]
+    writers = list(files.values())
+    temps: list[Path] = []
+    backups: list[Path | None] = []
+    swapped: list[int] = []
+    current = targets[0] if targets else Path()
+    try:
+        for target, writer in zip(targets, writers, strict=True):
+            current = target
+            if make_parents:
+                target.parent.mkdir(parents=True, exist_ok=True)
+            temps.append(_temporary(target))
+            writer(temps[-1])
+            os.chmod(temps[-1], ordinary_mode())
+        for target in targets:
+            current = target
+            backups.append(_backup(target))
+        for i, (target, tmp) in enumerate(zip(targets, temps, strict=True)):
+            current = target
+            os.replace(tmp, target)
+            swapped.append(i)
+    except BaseException as exc:
+        for i in reversed(swapped):
+            with contextlib.suppress(OSError):
+                if backups[i] is None:
+                    targets[i].unlink()
+                else:
+                    os.replace(backups[i], targets[i])
+        _discard(temps + [b for b in backups if b is not None])
+        if isinstance(exc, OSError):
+            raise WriteSetError(exc.errno, _message(current, targets, exc), str(current)) from None
+        raise
+    _discard([b for b in backups if b is not None])
+    return targets
+
+
+def _message(current: Path, targets: list[Path], exc: OSError) -> str:
+    if len(targets) == 1:
+        left = "it is left as it was" if current.exists() else "nothing was written"
+    else:
+        names = ", ".join(t.name for t in targets)
+        left = f"none of {names} was written (the previous files are left as they were)"
+    return f"cannot write {current}: {_cause(exc)}; {left}"
+
+
+def write_files(
+    out: Mapping[str | os.PathLike[str], str | bytes | Writer], make_parents: bool = False
+) -> list[Path]:
+    """:func:`write_set` of texts (UTF-8), bytes or writers."""
+    return write_set({p: _writer(v) for p, v in out.items()}, make_parents)
+
+
+def _writer(value: str | bytes | Writer) -> Writer:
+    if isinstance(value, str):
+        return text_writer(value)
+    if isinstance(value, bytes):
+        return lambda path: Path(path).write_bytes(value)
+    return value
+
+
+def _discard(paths: list[Path]) -> None:
+    for path in paths:
+        with contextlib.suppress(OSError):
+            path.unlink()
+
+
+STAGE_PREFIX = ".staged-"
+
+
+@contextlib.contextmanager
+def staged(folder: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield an empty hidden folder inside ``folder`` to write files into; when the block
+    ends, its files are written into ``folder`` as one set (:func:`write_set`). On any
+    exception nothing in ``folder`` changes (an OSError comes out as :class:`WriteSetError`).
+    The staging folder is held locked while in use; unlocked ones, left by killed
+    processes, are removed first."""
+    target = Path(folder)
+    target.mkdir(parents=True, exist_ok=True)
+    for stale in target.glob(f"{STAGE_PREFIX}*"):
+        _remove_if_unlocked(stale)
+    try:
+        stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=target))
+    except OSError as exc:
+        raise WriteSetError(exc.errno, _staged_message(target, exc), str(target)) from None
+    hold = os.open(stage, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(hold, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        try:
+            yield stage
+        except OSError as exc:
+            if isinstance(exc, WriteSetError):
+                raise
+            raise WriteSetError(exc.errno, _staged_message(target, exc), exc.filename) from None
+        write_set({target / p.name: _mover(p) for p in sorted(stage.iterdir()) if p.is_file()})
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        os.close(hold)
+
+
+def _staged_message(folder: Path, exc: OSError) -> str:
+    return f"cannot write into {folder}: {_cause(exc)}; none of its files was changed"
+
+
+def _mover(src: Path) -> Writer:
+    return lambda tmp: os.replace(src, tmp)
+
+
+def _remove_if_unlocked(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return  # in use by a live process
+    finally:
+        os.close(fd)
+    shutil.rmtree(path, ignore_errors=True)

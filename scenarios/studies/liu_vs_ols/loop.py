@@ -1,0 +1,133 @@
+"""The loop closed on the polisher: diagnose the fine residual, model the effect, refit, compensate.
+
+After the fine calibration (OLS on the identifiable set) the residual of the calibration
+layers goes to the residual diagnosis (calib.diagnosis.core). The effect it names becomes a
+correction of the actuator commands (calib.loop.effect); the full nonlinear model, geometry
+of the identifiable set and the effect's coefficients together, is refitted to the same
+readings by Levenberg-Marquardt (calib.loop.fit), and the NC poses are compensated by the
+fixed-point inversion of the corrected model (calib.loop.compensation), then re-measured.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from calib.analysis import analyse
+from calib.diagnosis import Diagnosis, diagnose
+from calib.fit import IdentificationResult, Observations
+from calib.loop import (
+    ActuatorCorrection,
+    LoopFit,
+    diagnosed_correction,
+    fit_with_effect,
+    loop_commands,
+    residual_rms_3d,
+)
+from scenarios.studies.liu_vs_ols.pipeline import Bench, Calibration
+from twin.kinematics import on_one_blas_thread
+
+
+@dataclass(frozen=True)
+class Loop:
+    diagnosis: Diagnosis
+    fit: LoopFit
+    residual_rms_before_mm: float  # 3D per reading, fine (OLS) geometry, nonlinear model
+    residual_rms_after_mm: float  # 3D per reading, geometry and effect refitted
+    noise_floor_rms_mm: float  # 3D per reading of the tracker noise: sqrt(3) sigma / sqrt(n)
+
+    def commands(
+        self,
+        bench: Bench,
+        poses: np.ndarray,
+        order: np.ndarray,
+        near: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
+        """``near``: the poses' configurations and actuator twist Jacobians on a nearby model
+        (see calib.loop.compensation.loop_commands)."""
+        return loop_commands(
+            bench.model, self.fit.values, self.fit.correction, poses, order, near=near
+        ).commands
+
+    def summary(self) -> dict[str, Any]:
+        d = self.diagnosis
+        corr = self.fit.correction
+        return {
+            "diagnosed_effect": d.chosen,
+            "reason": d.reason,
+            "residual_rms_before_mm": self.residual_rms_before_mm,
+            "residual_rms_after_mm": self.residual_rms_after_mm,
+            "noise_floor_rms_mm": self.noise_floor_rms_mm,
+            "chi2_p_value": d.chi2_p_value,
+            "modelled": list(corr.names),
+            "coefficients": {n: float(v) for n, v in zip(corr.names, corr.theta, strict=True)},
+            "coefficient_std": {
+                n: float(s)
+                for n, s in zip(
+                    corr.names, self.fit.std_errors[len(self.fit.columns) :], strict=True
+                )
+            },
+            "lm_iterations": self.fit.iterations,
+            "lm_converged": self.fit.converged,
+            "gauss_newton_polish_steps": self.fit.polish_steps,
+            "notes": list(d.notes),
+        }
+
+
+def fine_result(bench: Bench, cal: Calibration, values: np.ndarray) -> IdentificationResult:
+    """The fine calibration (``values``: coarse settings + the OLS estimate on the
+    identifiable set) as the identification result the diagnosis reads."""
+    names = bench.model.params.names
+    mask = np.zeros(len(names), dtype=bool)
+    mask[cal.problem.columns] = True
+    pred = bench.model.predict(values, cal.fine_commands)
+    jac = bench.model.jacobian(values, pred)
+    r = (cal.fine_measured - pred.targets).reshape(-1)
+    return IdentificationResult(
+        names=names,
+        values=values,
+        estimated=mask,
+        std_errors=np.full(len(names), np.nan),
+        covariance=np.zeros((int(mask.sum()), int(mask.sum()))),
+        residual_rms=float(np.sqrt(np.mean(r**2))),
+        iterations=1,
+        converged=True,
+        history=[],
+        report=analyse(jac[:, mask], [n for n, m in zip(names, mask, strict=True) if m]),
+    )
+
+
+@on_one_blas_thread  # small matrices throughout (at most 294 x 57)
+def close_loop(bench: Bench, cal: Calibration, estimator: str = "ols") -> Loop:
+    model = bench.model
+    values = cal.estimates[estimator][1]
+    obs = Observations(cal.fine_commands, cal.fine_measured)
+    result = fine_result(bench, cal, values)
+    diag = diagnose(
+        model,
+        obs,
+        result,
+        bench.sigma_m,
+        order=cal.fine_order,
+        tracker_position_m=np.asarray(bench.tracker.position_m),
+    )
+    start = values.copy()
+    if diag.geometry_correction is not None:
+        start[result.estimated] += diag.geometry_correction
+    correction: ActuatorCorrection = diagnosed_correction(
+        model, start, diag.coefficients, diag.time_origin, diag.time_unit
+    )
+    fit = fit_with_effect(
+        model,
+        start,
+        cal.problem.columns,
+        correction,
+        cal.fine_commands,
+        cal.fine_order,
+        cal.fine_measured,
+    )
+    before = residual_rms_3d(cal.fine_measured, model.predict(values, cal.fine_commands).targets)
+    floor = np.sqrt(3.0) * bench.sigma_m / np.sqrt(bench.tracker.repeats)
+    return Loop(diag, fit, before * 1e3, fit.residual_rms_3d_m * 1e3, float(floor) * 1e3)

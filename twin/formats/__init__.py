@@ -1,0 +1,31 @@
+"""Machine models as files: MJCF numbers and values, error models (TOML, generated for any
+MJCF), DH tables and URDF imported into MJCF (python -m
+twin.formats.dh_table|from_urdf|error_model)."""
+
+from common.face import face
+
+__all__, __getattr__, __dir__ = face(
+    __name__,
+    {
+        "dh_extract": (
+            "dh_table_of",
+            "format_dh_table",
+        ),
+        "dh_mjcf": (
+            "build_xml",
+            "exact",
+        ),
+        "dh_table": ("read_dh_table",),
+        "mjcf_values": (
+            "WrittenMjcf",
+            "mjcf_with_values",
+            "with_header",
+        ),
+        "parameter_file": (
+            "closest",
+            "load_parameter_set",
+            "load_values",
+            "read_utf8",
+        ),
+    },
+)
