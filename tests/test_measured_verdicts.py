@@ -62,21 +62,17 @@ def _identify_with(capsys, case: cases.Case, diag: Path, out: Path) -> tuple[int
     return _cli(capsys, *args)
 
 
+def _verify_test(capsys, case: cases.Case, result: Path, out: Path) -> tuple[int, str]:
+    """verify ``result`` on the test rows, written to ``out``."""
+    args = ["verify", *_files(case), "--result", result, "--set", "test", "--out", out]
+    return _cli(capsys, *args)
+
+
 def _identify_verify(capsys, case: cases.Case, tmp: Path) -> tuple[dict, dict, str]:
     result, verified = tmp / "r.json", tmp / "v.json"
     code, text = _cli(capsys, "identify", *_files(case), "--set", "calibration", "--out", result)
     assert code == EXIT_OK, text
-    code, vtext = _cli(
-        capsys,
-        "verify",
-        *_files(case),
-        "--result",
-        result,
-        "--set",
-        "test",
-        "--out",
-        verified,
-    )
+    code, vtext = _verify_test(capsys, case, result, verified)
     assert code == EXIT_OK, vtext
     return json.loads(result.read_text()), json.loads(verified.read_text()), text
 
@@ -172,17 +168,7 @@ def test_cobot_with_an_honest_tracker_accuracy_runs_the_loop(cobot, capsys, tmp_
     for a in added:
         p = r["parameters"][a["name"]]
         assert p["unit"] == "deg/(kN m) kg" and abs(p["value"] - truth) < 4 * p["std"], p
-    code, vtext = _cli(
-        capsys,
-        "verify",
-        *_files(cobot),
-        "--result",
-        refit,
-        "--set",
-        "test",
-        "--out",
-        verified_with,
-    )
+    code, vtext = _verify_test(capsys, cobot, refit, verified_with)
     assert code == EXIT_OK, vtext
     v = json.loads(verified_with.read_text())["after"]
     # the held-out poses at the tracker noise (3D RMS sqrt(3) x 10 um), as the diagnosis's
@@ -300,17 +286,7 @@ def test_a_named_gain_is_added_refitted_and_verified(stewart, capsys, tmp_path):
     gain = r["parameters"]["leg2.gain"]
     assert gain["unit"] == "ppm" and abs(gain["value"] - 3e4) < 3 * gain["std"]
     assert r["added_parameters"] == added and r["with"] == str(diag)
-    code, text = _cli(
-        capsys,
-        "verify",
-        *_files(stewart),
-        "--result",
-        result,
-        "--set",
-        "test",
-        "--out",
-        verified,
-    )
+    code, text = _verify_test(capsys, stewart, result, verified)
     assert code == EXIT_OK, text
     after = json.loads(verified.read_text())["after"]
     geometric = d["test"]["before"]
