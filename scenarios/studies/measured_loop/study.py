@@ -29,11 +29,8 @@ from scenarios.config import Scenario
 from scenarios.machine_setup import build_effects
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
-from scenarios.studies.serial_arm.study import _cli, _joints, _tracker
-from scenarios.truth_draw import TruthSpec, draw_truth
+from scenarios.studies.serial_arm.study import _cli, _tracker, drawn_arm
 from scenarios.twin_datasets import tracker_frame_dataset
-from twin.formats import load_parameter_set
-from twin.mechanism import Mechanism
 
 
 def _verified(common: list[str], result: Path, out: Path, log: Path) -> tuple[int, dict]:
@@ -48,17 +45,10 @@ def run(
 ) -> dict[str, Any]:
     t0 = time.perf_counter()
     rng = np.random.default_rng(scenario.get("seed", int))
-    model_path = scenario.resolve(scenario.get("model", str), "model")
-    errors_path = scenario.resolve(scenario.get("error_model", str), "error_model")
-    nominal = Mechanism.from_xml(model_path)
-    params = load_parameter_set(errors_path, nominal.model)
-    truth_values = draw_truth(params, TruthSpec.from_scenario(scenario), rng)
-    truth = nominal.with_model(params.inject(nominal.model, truth_values))
+    arm = drawn_arm(scenario, "model", "error_model", rng)
+    model_path, errors_path, truth, commands = arm.model, arm.errors, arm.truth, arm.commands
+    n_cal, n_test, sigma_mm = arm.n_cal, arm.n_test, arm.sigma_mm
     effects = build_effects(scenario)
-    n_cal = scenario.get("plan.calibration_poses", int)
-    n_test = scenario.get("plan.test_poses", int)
-    commands = _joints(nominal, n_cal + n_test, scenario.get("plan.joint_fraction", float), rng)
-    sigma_mm = scenario.get("tracker.sigma_mm", float)
     progress.step(f"measure {n_cal} + {n_test} poses with {[e.name for e in effects]}")
     data = write_dataset(
         tracker_frame_dataset(

@@ -19,6 +19,7 @@ import contextlib
 import io
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,7 @@ from scenarios.twin_datasets import tracker_frame_dataset
 from twin.formats import load_parameter_set
 from twin.kinematics import forward_batch
 from twin.mechanism import Mechanism
+from twin.parameters import ParameterSet
 from twin.tracker import Tracker, TrackerNoise
 
 
@@ -75,6 +77,50 @@ def _registration_error_mm(estimated: Registration, tracker: Tracker, readings: 
 POSE_TIMELINE = "pose"  # the pose number in the dataset, both variants
 
 
+@dataclass(frozen=True)
+class DrawnArm:
+    """An arm of the scenario's files, its drawn truth and its commands (calibration, then
+    test poses), with the accuracy its export declares."""
+
+    model: Path
+    errors: Path
+    nominal: Mechanism
+    params: ParameterSet
+    truth: Mechanism
+    commands: np.ndarray
+    n_cal: int
+    n_test: int
+    sigma_mm: float
+
+
+def drawn_arm(
+    scenario: Scenario, model_key: str, errors_key: str, rng: np.random.Generator
+) -> DrawnArm:
+    """The arm of ``model_key`` / ``errors_key`` with a truth drawn from ``truth.random`` and
+    joint commands over ``plan.joint_fraction`` of each range (in that order from ``rng``)."""
+    model_path = scenario.resolve(scenario.get(model_key, str), model_key)
+    errors_path = scenario.resolve(scenario.get(errors_key, str), errors_key)
+    nominal = Mechanism.from_xml(model_path)
+    params = load_parameter_set(errors_path, nominal.model)
+    truth_values = draw_truth(params, TruthSpec.from_scenario(scenario), rng)
+    truth = nominal.with_model(params.inject(nominal.model, truth_values))
+    n_cal = scenario.get("plan.calibration_poses", int)
+    n_test = scenario.get("plan.test_poses", int)
+    commands = _joints(nominal, n_cal + n_test, scenario.get("plan.joint_fraction", float), rng)
+    sigma_mm = scenario.get("tracker.sigma_mm", float)
+    return DrawnArm(
+        Path(model_path),
+        Path(errors_path),
+        nominal,
+        params,
+        truth,
+        commands,
+        n_cal,
+        n_test,
+        sigma_mm,
+    )
+
+
 def _variant(
     scenario: Scenario,
     name: str,
@@ -85,17 +131,10 @@ def _variant(
     progress: Progress,
     recorder: Recorder,
 ) -> dict[str, Any]:
-    model_path = scenario.resolve(scenario.get(model_key, str), model_key)
-    errors_path = scenario.resolve(scenario.get(errors_key, str), errors_key)
-    nominal = Mechanism.from_xml(model_path)
-    params = load_parameter_set(errors_path, nominal.model)
-    truth_values = draw_truth(params, TruthSpec.from_scenario(scenario), rng)
-    truth = nominal.with_model(params.inject(nominal.model, truth_values))
-    tracker = _tracker(scenario)
-    n_cal = scenario.get("plan.calibration_poses", int)
-    n_test = scenario.get("plan.test_poses", int)
-    commands = _joints(nominal, n_cal + n_test, scenario.get("plan.joint_fraction", float), rng)
-    sigma_mm = scenario.get("tracker.sigma_mm", float)
+    arm = drawn_arm(scenario, model_key, errors_key, rng)
+    model_path, errors_path, nominal, params = arm.model, arm.errors, arm.nominal, arm.params
+    truth, commands, n_cal, n_test = arm.truth, arm.commands, arm.n_cal, arm.n_test
+    tracker, sigma_mm = _tracker(scenario), arm.sigma_mm
     (out_dir / "datasets").mkdir(parents=True, exist_ok=True)
     data = write_dataset(
         tracker_frame_dataset(
