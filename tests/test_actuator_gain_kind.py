@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fd_support import central_differences
 
 from calib.analysis.identifiability import analyse
 from calib.compensate.compensation import compensated_commands
@@ -86,14 +87,7 @@ def _fd_jacobian(model: CalibrationModel, x: np.ndarray, commands: np.ndarray) -
     """Central differences of the predicted targets; steps of 1e-6 (m, rad) and 10 ppm
     (the closure solve stops near 1e-13 m: a smaller step would measure that)."""
     steps = np.where(model.params.is_gain, 1e-5, 1e-6)
-    cols = []
-    for k, h in enumerate(steps):
-        dx = np.zeros(len(x))
-        dx[k] = h
-        plus = model.predict(x + dx, commands).targets.reshape(-1)
-        minus = model.predict(x - dx, commands).targets.reshape(-1)
-        cols.append((plus - minus) / (2 * h))
-    return np.array(cols).T
+    return central_differences(model, x, commands, steps)
 
 
 @pytest.mark.parametrize("name", ["arm", "hexapod"])

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fd_support import central_differences
 
 import calib.fit.joint_compliance as joint_compliance
 import calib.fit.model as calib_model
@@ -100,14 +101,7 @@ def _fd(model: CalibrationModel, x: np.ndarray, commands: np.ndarray, size: floa
     hundredth of the compliances' ``size`` for a compliance)."""
     steps = np.where(model.params.is_gain, 1e-5, 1e-6)
     steps = np.where(model.params.is_compliance, 1e-2 * size, steps)
-    cols = []
-    for k, h in enumerate(steps):
-        dx = np.zeros(len(x))
-        dx[k] = h
-        plus = model.predict(x + dx, commands).targets.reshape(-1)
-        minus = model.predict(x - dx, commands).targets.reshape(-1)
-        cols.append((plus - minus) / (2 * h))
-    return np.array(cols).T
+    return central_differences(model, x, commands, steps)
 
 
 def _relative(fd: np.ndarray, jac: np.ndarray, params: ParameterSet) -> np.ndarray:
