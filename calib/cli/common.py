@@ -101,3 +101,11 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
         )
     except FitFailed as exc:
         return failed(exc)
+
+
+def result_options(p: argparse.ArgumentParser) -> None:
+    """The nominal model, its error model and a result of identify: what a command that
+    starts from a calibration (compensate, export) reads."""
+    p.add_argument("--model", required=True, help="nominal MJCF of the machine")
+    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
+    p.add_argument("--result", required=True, help="result JSON written by identify --out")

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.cli.common import result_options
 from calib.compensate import Compensation, IdentifiedMachine, compensate, load_identified_machine
 from calib.data import DesiredPoses, DesiredPosesError, read_desired_poses
 from calib.fit import EXIT_OK, EXIT_UNREACHABLE, model_from_files
@@ -49,9 +50,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--model", required=True, help="nominal MJCF of the machine")
-    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
-    p.add_argument("--result", required=True, help="result JSON written by identify --out")
+    result_options(p)
     p.add_argument(
         "--poses", required=True, help="desired tool poses: pose_id,x_mm,y_mm,z_mm[,rx_deg,...]"
     )

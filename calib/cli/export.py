@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 
+from calib.cli.common import result_options
 from calib.compensate import FK_TOLERANCE_M, export_model, gains_text, load_identified_machine
 from calib.fit import EXIT_OK, model_from_files
 
@@ -27,9 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--model", required=True, help="nominal MJCF of the machine")
-    p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
-    p.add_argument("--result", required=True, help="result JSON written by identify --out")
+    result_options(p)
     p.add_argument("--out", required=True, help="the calibrated MJCF to write")
     p.add_argument(
         "--dh-out",
