@@ -251,6 +251,14 @@ def calibrated_dh_text(machine: IdentifiedMachine, model_path: Path) -> str:
             "the identified encoder offsets",
             f"generate its model: python -m twin.formats.dh_table THIS.csv --name "
             f"{machine.nominal.name} --out-dir DIR",
+            *(
+                [
+                    f"not in this table: the {gains_text(machine)}; the calibrated MJCF "
+                    "holds the gains"
+                ]
+                if machine.model.params.has_gains
+                else []
+            ),
         ),
     )
 
