@@ -112,7 +112,7 @@ def test_exported_gains_predict_as_the_result(loop, capsys):
     without = json.loads(v.read_text())["as_is"]["rms_mm"]
     print("without gears", without)
     assert without > 5 * own_rms
-    side = json.loads((tmp / "hexapod_cal.calibration.json").read_text())
+    side = json.loads((tmp / "hexapod_cal.xml.calibration.json").read_text())
     assert side["not_held"] == [] and len(side["held_in_model"]["actuator_gains"]) == 6
 
 
@@ -165,7 +165,7 @@ def test_what_the_mjcf_cannot_hold_is_in_the_sidecar_and_verify_says_so_first(tm
     args = ["export", "--model", str(xml), "--errors", str(toml), "--result", str(result)]
     assert main([*args, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    side = tmp_path / "arm_cal.calibration.json"
+    side = tmp_path / "arm_cal.xml.calibration.json"
     assert f"wrote {side}: 2 identified parameter(s) the MJCF cannot hold" in printed
     content = json.loads(side.read_text())
     shown = params.to_display(values)

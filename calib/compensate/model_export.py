@@ -25,6 +25,7 @@ import numpy as np
 
 from calib.compensate.identified_machine import IdentifiedMachine
 from calib.compensate.sidecar import not_held, sidecar_path, sidecar_text
+from calib.compensate.urdf_export import UrdfExport, calibrated_urdf, source_urdf
 from calib.exceptions import CalibError
 from common.write_set import write_files
 from twin.exceptions import ClosureError, WorkspaceError
@@ -202,6 +203,8 @@ class Export:
     check: KinematicsCheck
     sidecar: Path
     not_held: list[dict]  # the parameters the model cannot hold (in the sidecar)
+    urdf_out: Path | None = None
+    urdf: UrdfExport | None = None
 
 
 def _header(
@@ -269,10 +272,14 @@ def export_model(
     out: str | os.PathLike[str],
     dh_out: str | os.PathLike[str] | None = None,
     commands: np.ndarray | None = None,
+    urdf_out: str | os.PathLike[str] | None = None,
+    urdf: str | os.PathLike[str] | None = None,
 ) -> Export:
-    """Write the calibrated MJCF to ``out`` (and the calibrated DH table to ``dh_out``)
-    after checking the written model's kinematics against the identified one at
-    ``commands`` (default: :func:`probe_commands`); nothing is written if a part fails."""
+    """Write the calibrated MJCF to ``out`` and its sidecar (and the calibrated DH table to
+    ``dh_out``, the calibrated URDF of the model's URDF ``urdf`` (default: the one its header
+    names) to ``urdf_out`` with its sidecar) after checking the written models' kinematics
+    against the identified one at ``commands`` (default: :func:`probe_commands`); nothing is
+    written if a part fails."""
     model_path, out = Path(model_path), Path(out)
     if out.resolve() == model_path.resolve():
         raise ExportError(f"--out {out} is the nominal model itself: choose another file")
@@ -307,5 +314,16 @@ def export_model(
     }
     if dh_text is not None:
         files[Path(dh_out)] = dh_text
-    write_files(files)  # the model, its sidecar and its DH table together, or none
-    return Export(out, None if dh_out is None else Path(dh_out), written, check, side, missing)
+    done_urdf = None
+    if urdf_out is not None:
+        urdf_out = Path(urdf_out)
+        if sidecar_path(urdf_out) == side:
+            raise ExportError(f"--urdf-out {urdf_out} and --out {out} would share one sidecar")
+        urdf_out.parent.mkdir(parents=True, exist_ok=True)
+        source = source_urdf(model_path, urdf)
+        done_urdf = calibrated_urdf(machine, source, urdf_out, probes, FK_TOLERANCE_M)
+        files[urdf_out] = done_urdf.text
+        files[done_urdf.sidecar] = done_urdf.sidecar_text
+    write_files(files)  # the models, their sidecars and the DH table together, or none
+    dh = None if dh_out is None else Path(dh_out)
+    return Export(out, dh, written, check, side, missing, urdf_out, done_urdf)

@@ -1,4 +1,4 @@
-"""What an exported model cannot hold, written beside it (``M.xml``: ``M.calibration.json``).
+"""What an exported model cannot hold, written beside it (``M.xml``: ``M.xml.calibration.json``).
 
 ``calib export`` writes the identified geometry and the actuator gains into the MJCF
 (twin.formats.mjcf_values). Every other identified parameter, whatever its kind (a joint
@@ -36,7 +36,7 @@ WHY_NOT_HELD = {
 def sidecar_path(model_path: str | Path) -> Path:
     """The sidecar of the model file ``model_path``."""
     p = Path(model_path)
-    return p.with_name(p.stem + SIDECAR_SUFFIX)
+    return p.with_name(p.name + SIDECAR_SUFFIX)
 
 
 def not_held(machine: IdentifiedMachine, held_kinds: tuple[str, ...]) -> list[dict[str, Any]]:
