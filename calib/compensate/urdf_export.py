@@ -27,6 +27,7 @@ from twin.exceptions import TwinError
 from twin.formats.from_urdf import SiteSpec, build_xml
 from twin.formats.urdf_import import read_urdf
 from twin.formats.urdf_values import urdf_with_model
+from twin.kinematics.batch import forward_batch
 from twin.mechanism import Mechanism
 
 URDF_KINDS = ("body_pos", "body_rot", "joint_zero")  # what a URDF's joint origins hold
@@ -77,9 +78,13 @@ def _urdf_mechanism(path: Path, name: str, like: Mechanism) -> Mechanism:
 
 
 def _difference(a: Mechanism, b: Mechanism, joints: np.ndarray) -> float:
-    from calib.compensate.model_export import kinematics_difference
-
-    return kinematics_difference(a, b, joints, joints).max_position_m
+    """The largest distance (m) of a target or the tool point of ``a`` and ``b`` at the same
+    joint values."""
+    fa, fb = forward_batch(a, joints, check_stroke=False), forward_batch(b, joints)
+    points = np.concatenate(
+        [fa.targets - fb.targets, (fa.tool_position - fb.tool_position)[:, None]], 1
+    )
+    return float(np.max(np.linalg.norm(points, axis=-1)))
 
 
 def calibrated_urdf(
