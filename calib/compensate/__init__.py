@@ -20,6 +20,10 @@ __all__, __getattr__, __dir__ = face(
             "gains_text",
             "kinematics_difference",
         ),
+        "sidecar": (
+            "missing_line",
+            "sidecar_path",
+        ),
         "poses": (
             "Compensation",
             "compensate",
