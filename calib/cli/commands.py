@@ -45,6 +45,7 @@ from pathlib import Path
 import calib.cli.compensate as cmd_compensate
 import calib.cli.export as cmd_export
 from calib.cli.common import (
+    identify_exit_code,
     positive_int,
     print_verdict,
     prior_spec,
@@ -145,13 +146,6 @@ def _csv_text(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def _refused(loaded) -> int:
-    """The exit code identify gave the result (0 if it was accepted or does not say)."""
-    verdict = loaded.data.get("verdict") or {}
-    code = verdict.get("exit_code", EXIT_OK)
-    return code if isinstance(code, int) and not isinstance(code, bool) else EXIT_OK
-
-
 def cmd_verify(args: argparse.Namespace) -> int:
     if args.result is None:  # the model as it is, e.g. one written by export
         import calib.cli.verify_as_is as verify_as_is
@@ -163,7 +157,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     loaded = load_result(args.result, expected_model=model.nominal.name)
     model = model_for_result(model, loaded.data)
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
-    refused = _refused(loaded)
+    refused = identify_exit_code(loaded)
     if refused != EXIT_OK:
         message = (loaded.data.get("verdict") or {}).get("message", "")
         print(
