@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 
-from calib.cli.common import result_options
+from calib.cli.common import refused_result, result_options
 from calib.compensate import FK_TOLERANCE_M, export_model, gains_text, load_identified_machine
 from calib.fit import EXIT_OK, model_from_files
 
@@ -50,6 +50,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     model = model_from_files(args.model, args.errors)
     machine = load_identified_machine(model, args.result)
+    refused = refused_result(machine.result, args.force, "export")
+    if refused:  # identify's own exit code and reason
+        return refused
     done = export_model(
         machine, args.model, args.out, args.dh_out, urdf_out=args.urdf_out, urdf=args.urdf
     )

@@ -29,5 +29,11 @@ __all__, __getattr__, __dir__ = face(
             "compensate",
             "solve_each",
         ),
+        "program": (
+            "NominalTargets",
+            "compensate_program",
+            "nearest_targets",
+            "nominal_targets",
+        ),
     },
 )
