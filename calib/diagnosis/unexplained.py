@@ -13,17 +13,12 @@ from __future__ import annotations
 import numpy as np
 
 from calib.analysis.rank_structure import rank_correlations
+from calib.analysis.spearman import spearman
 from calib.diagnosis.context import Context
 from calib.diagnosis.problem import Problem
 from twin.rotations import rotvec_from_matrix
 
 BANDWIDTHS = (0.15, 0.3, 0.6, 1.2, 2.5)
-
-
-def _stats():
-    from scipy import stats  # lazy: scipy.stats costs about 1 s at import
-
-    return stats
 
 
 def features(ctx: Context) -> dict[str, np.ndarray]:
@@ -176,6 +171,6 @@ def residual_structure(
     }
     out = {}
     for name, v in probes.items():
-        rho = _stats().spearmanr(size, v).statistic if np.ptp(v) > 0 else 0.0
+        rho = spearman(size, v)[0] if np.ptp(v) > 0 else 0.0
         out[name] = float(np.nan_to_num(rho))
     return out
