@@ -10,6 +10,7 @@ process whose peak resident memory the operating system reports (``os.wait4``).
 
 from __future__ import annotations
 
+import itertools
 import os
 import subprocess
 import sys
@@ -56,7 +57,7 @@ def campaign(machine: str, n_readings: int, folder: Path, seed: int = 0) -> Path
     cmds = _commands(nominal, n_poses, rng)
     tracker = Tracker(noise=TrackerNoise("gaussian", 1e-5, 0.0))
     ds = measured_dataset(truth, cmds, np.zeros((n_poses, 6)), "calibration", tracker, rng)
-    n_cal = int(round(0.9 * n_poses))
+    n_cal = round(0.9 * n_poses)
     sets = np.array(["calibration"] * n_cal + ["test"] * (n_poses - n_cal))
     declared = {**(ds.tracker or {}), "sigma_mm": 0.01}
     ds = replace(ds, sets=sets, commanded_poses=None, tracker=declared)
@@ -116,7 +117,7 @@ def _line(row: dict) -> str:
 def _ratios(rows: dict, readings: tuple[int, ...]) -> dict:
     """time and memory of each size over the previous one (10k/1k, 100k/10k)."""
     out: dict = {}
-    for small, large in zip(readings[:-1], readings[1:], strict=True):
+    for small, large in itertools.pairwise(readings):
         for cmd in ("identify", "diagnose"):
             a, b = rows[str(small)].get(cmd), rows[str(large)].get(cmd)
             if a and b:
