@@ -8,6 +8,9 @@ default and
   plain least squares) against scipy.optimize.least_squares with a finite-difference Jacobian
   on a fresh model over the same free parameters with tolerances as tight as ours, best of N,
   both answers compared (bench.identification);
+* what a campaign costs (bench.scaling): identify and diagnose from the command line on twin
+  data of 1k, 10k and 100k readings of the 6R arm and the hexapod, wall time and peak memory
+  each, with the ratios 10k/1k and 100k/10k (diagnose up to 10k unless BENCH_ALL=1);
 * every scenario run whole into a temporary results root (bench.scenario_times);
   optimal_poses only with BENCH_ALL=1.
 Targets (on 2 cores): identification >= 15 x scipy FD on the hexapod (256 poses), >= 50,000
@@ -27,6 +30,7 @@ from bench.fk import fk_rates
 from bench.identification import SCIPY_OPTIONS, compare
 from bench.machines import MACHINES
 from bench.report import bench_markdown
+from bench.scaling import scaling
 from bench.scenario_times import scenario_times
 from common.atomic_files import json_text
 from common.write_set import write_files
@@ -84,6 +88,8 @@ def main() -> None:
     hexapod = out["machines"]["hexapod"]
     for key, source in LEGACY.items():
         out[key] = hexapod[source]
+    every = os.environ.get("BENCH_ALL") == "1"
+    out["scaling"] = scaling(diagnose_max=None if every else 10_000)
     times, skipped, errors = scenario_times()
     out.update(times)
     out["scenarios_skipped"] = skipped

@@ -70,6 +70,7 @@ def bench_markdown(out: dict) -> str:
     for k in keys:
         lines.append(f"| {k} | " + " | ".join(_fmt(machines[n].get(k)) for n in names) + " |")
     lines.append("| poses | " + " | ".join(machines[n]["poses"] for n in names) + " |")
+    lines += _scaling_lines(out.get("scaling", {}))
     lines += ["", "## Scenarios (whole runs, temporary results root)", ""]
     lines += ["| scenario | seconds |", "|---|---|"]
     for k, v in out.items():
@@ -81,3 +82,28 @@ def bench_markdown(out: dict) -> str:
         lines.append(f"| {name} | failed: {error.splitlines()[0][:200]} |")
     lines.append("")
     return "\n".join(lines)
+
+
+def _scaling_lines(scaling: dict) -> list[str]:
+    """What a campaign of N readings costs: the command line's wall time and peak memory."""
+    if not scaling:
+        return []
+    lines = [
+        "",
+        "## Campaign size (the command line, a fresh process each)",
+        "",
+        "| machine | readings | identify s | identify MB | diagnose s | diagnose MB |",
+        "|---|---|---|---|---|---|",
+    ]
+    for machine, block in scaling.items():
+        for n, row in block["by_readings"].items():
+            cells = []
+            for cmd in ("identify", "diagnose"):
+                r = row.get(cmd)
+                cells += [_fmt(r["wall_s"]), _fmt(r["peak_mb"])] if r else ["-", "-"]
+            lines.append(f"| {machine} | {n} | " + " | ".join(cells) + " |")
+    lines += ["", "| machine | ratio | time | memory |", "|---|---|---|---|"]
+    for machine, block in scaling.items():
+        for key, r in block["ratios"].items():
+            lines.append(f"| {machine} | {key} | {_fmt(r['time'])} | {_fmt(r['memory'])} |")
+    return lines

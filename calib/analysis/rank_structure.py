@@ -11,13 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from calib.analysis.spearman import spearman
+
 ALPHA = 0.01
-
-
-def _stats():
-    from scipy import stats  # lazy: scipy.stats costs about 1 s at import
-
-    return stats
 
 
 def rank_correlations(size: np.ndarray, probes: dict[str, np.ndarray]) -> dict[str, dict]:
@@ -28,11 +24,8 @@ def rank_correlations(size: np.ndarray, probes: dict[str, np.ndarray]) -> dict[s
     for name, v in probes.items():
         v = np.asarray(v, dtype=float)
         if np.ptp(v) > 0 and np.ptp(size) > 0 and len(v) > 2:
-            res = _stats().spearmanr(size, v)
-            out[name] = {
-                "rho": float(np.nan_to_num(res.statistic)),
-                "p": float(np.nan_to_num(res.pvalue, nan=1.0)),
-            }
+            rho, p = spearman(size, v)
+            out[name] = {"rho": float(np.nan_to_num(rho)), "p": float(np.nan_to_num(p, nan=1.0))}
         else:
             out[name] = {"rho": 0.0, "p": 1.0}
     return out

@@ -41,8 +41,11 @@ class Redundancy:
 def null_basis(a_u: np.ndarray, n_null: int) -> tuple[np.ndarray, np.ndarray]:
     """Orthonormal null basis (n, d) of ``a_u`` (its ``n_null`` weakest right singular
     vectors) and the minimum-norm solution operator's pieces (V1, S1) of the rest."""
-    _, s, vt = np.linalg.svd(a_u, full_matrices=True)  # every right vector, also for m < n
-    n = a_u.shape[1]
+    m, n = a_u.shape
+    # every right vector, also for m < n, without the (m, m) left factor of a full SVD: the
+    # right vectors of a tall matrix are those of its triangular factor (n, n)
+    small = np.linalg.qr(a_u, mode="r") if m > n else a_u
+    _, s, vt = np.linalg.svd(small, full_matrices=True)
     keep = n - n_null
     return vt[keep:].T, (vt[:keep].T, s[:keep])
 

@@ -1,0 +1,129 @@
+"""What a campaign of N readings costs: identify and diagnose as a user runs them (the command
+line, in a fresh process each), wall time and peak memory, on twin data of 1k, 10k and 100k
+readings of a 6R arm (one reflector) and of the hexapod (three reflectors), and the ratios
+10k/1k and 100k/10k, so that growth is read in one run.
+
+The readings are made by the twin (a uniform truth, a 0.01 mm tracker in the base frame, 90 %
+calibration and 10 % test rows) and written as a Dataset; each command runs in its own child
+process whose peak resident memory the operating system reports (``os.wait4``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from calib.data import write_dataset
+from scenarios.config import REPO_ROOT
+from scenarios.truth_draw import TruthSpec, draw_truth
+from scenarios.twin_datasets import measured_dataset
+from twin.formats.parameter_file import load_parameter_set
+from twin.mechanism import Mechanism
+from twin.tracker import Tracker, TrackerNoise
+from twin.workspace import random_poses
+
+READINGS = (1_000, 10_000, 100_000)
+MACHINES = {  # name: (MJCF, error model)
+    "arm": ("models/arm6r.xml", "models/arm6r.params.toml"),
+    "hexapod": ("models/hexapod_rrrprr.xml", "models/hexapod_rrrprr.params.toml"),
+}
+
+
+def _commands(nominal: Mechanism, n: int, rng: np.random.Generator) -> np.ndarray:
+    if nominal.is_serial:  # a serial arm: joint commands over 80 % of each range
+        lo, hi = nominal.actuator_range.T
+        mid, half = (lo + hi) / 2, 0.8 * (hi - lo) / 2
+        return rng.uniform(mid - half, mid + half, (n, nominal.n_actuators))
+    return random_poses(nominal, n, rng)[1]
+
+
+def campaign(machine: str, n_readings: int, folder: Path, seed: int = 0) -> Path:
+    """A twin-made Dataset of about ``n_readings`` readings of ``machine`` in ``folder``."""
+    xml, errors = MACHINES[machine]
+    nominal = Mechanism.from_xml(REPO_ROOT / xml)
+    params = load_parameter_set(REPO_ROOT / errors, nominal.model)
+    rng = np.random.default_rng(seed)
+    spec = TruthSpec("uniform", 0.3, 0.03, 0.0, 0.05)
+    truth = nominal.with_model(params.inject(nominal.model, draw_truth(params, spec, rng)))
+    n_poses = max(n_readings // len(nominal.target_names), 10)
+    cmds = _commands(nominal, n_poses, rng)
+    tracker = Tracker(noise=TrackerNoise("gaussian", 1e-5, 0.0))
+    ds = measured_dataset(truth, cmds, np.zeros((n_poses, 6)), "calibration", tracker, rng)
+    n_cal = round(0.9 * n_poses)
+    sets = np.array(["calibration"] * n_cal + ["test"] * (n_poses - n_cal))
+    declared = {**(ds.tracker or {}), "sigma_mm": 0.01}
+    ds = replace(ds, sets=sets, commanded_poses=None, tracker=declared)
+    return write_dataset(ds, folder / f"{machine}_{n_readings}.csv")
+
+
+def run_measured(args: list[str]) -> dict:
+    """Run ``python -m calib ARGS`` in a child process: wall time, peak memory, exit code."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "calib", *args],
+        cwd=REPO_ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    # ru_maxrss is in kilobytes on Linux
+    return {
+        "wall_s": wall,
+        "peak_mb": usage.ru_maxrss / 1024.0,
+        "exit_code": proc.returncode,
+        **({"stderr": err[-500:]} if proc.returncode not in (0,) else {}),
+    }
+
+
+def scaling(readings: tuple[int, ...] = READINGS, diagnose_max: int | None = None) -> dict:
+    """identify and diagnose per machine and size; ``diagnose_max``: the largest campaign
+    diagnosed (None: all)."""
+    out: dict = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for machine, (xml, errors) in MACHINES.items():
+            rows: dict = {}
+            for n in readings:
+                data = campaign(machine, n, folder)
+                model = ["--model", str(REPO_ROOT / xml), "--errors", str(REPO_ROOT / errors)]
+                common = [*model, "--data", str(data), "--set", "calibration"]
+                row = {"identify": run_measured(["identify", *common])}
+                if diagnose_max is None or n <= diagnose_max:
+                    row["diagnose"] = run_measured(["diagnose", *common, "--test-set", "test"])
+                rows[str(n)] = row
+                print(f"scaling {machine} {n} readings: {_line(row)}", flush=True)
+            out[machine] = {"by_readings": rows, "ratios": _ratios(rows, readings)}
+    return out
+
+
+def _line(row: dict) -> str:
+    return "; ".join(
+        f"{cmd} {r['wall_s']:.2f} s, {r['peak_mb']:.0f} MB (exit {r['exit_code']})"
+        for cmd, r in row.items()
+    )
+
+
+def _ratios(rows: dict, readings: tuple[int, ...]) -> dict:
+    """time and memory of each size over the previous one (10k/1k, 100k/10k)."""
+    out: dict = {}
+    for small, large in itertools.pairwise(readings):
+        for cmd in ("identify", "diagnose"):
+            a, b = rows[str(small)].get(cmd), rows[str(large)].get(cmd)
+            if a and b:
+                key = f"{cmd}_{large // 1000}k_over_{small // 1000}k"
+                out[key] = {
+                    "time": b["wall_s"] / a["wall_s"],
+                    "memory": b["peak_mb"] / a["peak_mb"],
+                }
+    return out
