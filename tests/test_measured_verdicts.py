@@ -202,7 +202,11 @@ def test_cobot_with_an_honest_tracker_accuracy_runs_the_loop(cobot, capsys, tmp_
     code, text = _cli(
         capsys, "export", *files, "--result", refit, "--out", tmp_path / "calibrated.xml"
     )
-    assert code == EXIT_OK and "joint compliances, no geometry" in text, text
+    assert code == EXIT_OK and "the joint compliances, which an MJCF cannot hold" in text, text
+    # what the MJCF cannot hold is beside it, and verify of the model as it is says so first
+    sidecar = json.loads((tmp_path / "calibrated.xml.calibration.json").read_text())
+    held_out = sorted(p["name"] for p in sidecar["not_held"])
+    assert held_out == [f"A{i}.compliance_x_payload" for i in range(2, 6)], sidecar
 
 
 def test_verify_of_a_refused_result_says_so(cobot, capsys, tmp_path):
