@@ -377,6 +377,11 @@ def regularisation_text(run: CalibrationRun) -> str:
             + ", ".join(f"{k} {v:.4f} mm" for k, v in cv.items() if k != "none")
             + ")"
         )
+    if sub.reason:
+        return (
+            f"regularised: {sub.n_frozen} of {weak} kept at zero (minimum norm), the rest "
+            f"estimated: {sub.reason}"
+        )
     return (
         f"regularised: {sub.n_frozen} of {weak} kept at zero (minimum norm), the rest "
         f"estimated; {sub.folds}-fold cross-validated 3D RMS {cv[cut_label(sub.cut)]:.4f} mm, "
