@@ -149,6 +149,7 @@ def identify(
             plain.values[free] - (0.0 if x0 is None else np.asarray(x0, dtype=float)[free]),
             ranges,
             plain.fit_pose_of_row,
+            one_se=plain.converged,
         )
         res = plain
         if choice.basis is not None:

@@ -101,11 +101,14 @@ def choose_subspace(
     pose_of_row: np.ndarray,
     folds: int = FOLDS,
     cuts: tuple[float | None, ...] = CUTS,
+    one_se: bool = True,
 ) -> SubspaceChoice:
     """The subspace to estimate in, from the plain least-squares fit's linearisation:
     ``residual`` (m,) there and ``jac`` (m, k + r) d residual / d (free parameters, then the
     registration's r); ``offsets`` (k,) the free parameters there minus their start values,
-    ``ranges`` (k,) SI, ``pose_of_row`` (m,). The data's residual scale is the plain fit's."""
+    ``ranges`` (k,) SI, ``pose_of_row`` (m,). The data's residual scale is the plain fit's.
+    ``one_se=False`` drops the one-standard-error rule: for a plain fit that did not
+    converge, which is no answer for the rule to protect."""
     m, k = len(residual), len(ranges)
     sigma = math.sqrt(float(residual @ residual) / max(m - jac.shape[1], 1))
     a = jac[:, :k] * ranges
@@ -137,7 +140,9 @@ def choose_subspace(
     # one-standard-error rule: a cut is a candidate only where its gain over plain least
     # squares, the mean over poses of the paired difference of their held-out squared
     # errors, exceeds that mean's standard error (what the poses' scatter can tell)
-    eligible = [None] + [c for c in cuts if c is not None and _clear_gain(per_pose, c)]
+    eligible = [None] + [
+        c for c in cuts if c is not None and (not one_se or _clear_gain(per_pose, c))
+    ]
     best = min(cv[cut_label(c)] for c in eligible)
     chosen: float | None = None
     for cut in eligible:  # the strongest within TIE of the best, never above plain's
