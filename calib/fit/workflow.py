@@ -25,6 +25,7 @@ from calib.data.result_file import (
 from calib.data.select import CALIBRATION, select_set
 from calib.estimators.levenberg_marquardt import LMOptions
 from calib.exceptions import CalibError, TooManyOutliersError
+from calib.fit.fuller_model import FullerModel, fuller_or_not
 from calib.fit.identification import IdentificationResult, identify
 from calib.fit.model import CalibrationModel
 from calib.fit.observations import Observations, bind_dataset
@@ -75,6 +76,7 @@ class CalibrationRun:
     set_name: str | None = None
     regularisation: PriorChoice | None = None  # the user's prior (--prior-std), if any
     structure: dict[str, dict] = field(default_factory=dict)  # rank correlations of the residual
+    fuller: FullerModel | None = None  # why the model carries parameters beyond the error model
 
 
 def calibrate(
@@ -100,27 +102,11 @@ def calibrate(
     obs = bind_dataset(model.nominal, picked)
     accuracy = declared_accuracy(sigma_mm, picked.tracker)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
-    ranges = physical_ranges(model.params, prior_spec)
-    choice = None
-    if prior_spec is None:
-        result = _identified(model, obs, unidentifiable, options, None, regularise)
-    else:  # the user's widths, weighed against the residual the data show
-        plain = _identified(model, obs, unidentifiable, options, None, False)
-        free = plain.estimated
-        choice = choose_prior(
-            plain.fit_jacobian,
-            plain.fit_residual,
-            plain.values[free],
-            ranges[free],
-            plain.fit_pose_of_row,
-            plain.fit_jacobian.shape[1],
-            scales=(None, 1.0),
-        )
-        choice = replace(choice, scale=1.0)
-        # gains and compliances free: the prior is on the geometry
-        widths = np.where(np.asarray(model.params.is_geometric, bool), ranges, np.inf)
-        prior = Prior(widths, choice.noise_sigma_m)
-        result = _identified(model, obs, unidentifiable, options, prior, False)
+    fit = _Fitter(obs, unidentifiable, options, prior_spec, regularise)
+    result, choice = fit(model)
+    fuller = None
+    if result.rejected and obs.frame == "base":  # before readings are rejected: a fuller model
+        model, result, choice, fuller = fuller_or_not(model, picked, obs.commands, result, choice, fit)
     try:
         verdict, residual, structure = judge(model, obs, result, accuracy, max_ratio, picked)
     except TwinError as exc:  # the estimate went where the machine does not close
@@ -147,7 +133,42 @@ def calibrate(
         set_name=used,
         regularisation=choice,
         structure=structure,
+        fuller=fuller,
     )
+
+
+@dataclass(frozen=True)
+class _Fitter:
+    """One fit of a model to the selected observations, as :func:`calibrate` asks for it."""
+
+    obs: Observations
+    unidentifiable: str
+    options: LMOptions | None
+    prior_spec: PriorSpec | None
+    regularise: bool
+
+    def __call__(self, model: CalibrationModel) -> tuple[IdentificationResult, PriorChoice | None]:
+        obs, unidentifiable, options = self.obs, self.unidentifiable, self.options
+        if self.prior_spec is None:
+            return _identified(model, obs, unidentifiable, options, None, self.regularise), None
+        # the user's widths, weighed against the residual the data show
+        ranges = physical_ranges(model.params, self.prior_spec)
+        plain = _identified(model, obs, unidentifiable, options, None, False)
+        free = plain.estimated
+        choice = choose_prior(
+            plain.fit_jacobian,
+            plain.fit_residual,
+            plain.values[free],
+            ranges[free],
+            plain.fit_pose_of_row,
+            plain.fit_jacobian.shape[1],
+            scales=(None, 1.0),
+        )
+        choice = replace(choice, scale=1.0)
+        # gains and compliances free: the prior is on the geometry
+        widths = np.where(np.asarray(model.params.is_geometric, bool), ranges, np.inf)
+        prior = Prior(widths, choice.noise_sigma_m)
+        return _identified(model, obs, unidentifiable, options, prior, False), choice
 
 
 def _identified(
@@ -299,6 +320,7 @@ def result_content(run: CalibrationRun, model_path: str, errors_path: str, data_
         "near_collinear_groups": run.groups,
         "correlations_above_0.9": run.correlations,
         "parameters": parameters,
+        "fuller_model": None if run.fuller is None else run.fuller.as_dict(),
     }
 
 
