@@ -146,9 +146,8 @@ class FullerModel:
             f"{', '.join(p.name for p in self.added)} added, {len(self.explained)} of the "
             f"{self.rejected_before} reading(s) the error model's fit rejected as gross "
             f"outliers (residuals {span} mm, above its limit of {self.limit_before_mm:.4f} mm; "
-            f"poses {ids}) lie within the fuller fit's limit of {self.limit_after_mm:.4f} mm and "
-            "are "
-            f"kept{still}; residual {self.rms_before_mm:.4f} mm RMS on the readings kept "
+            f"poses {ids}) lie within the fuller fit's limit of {self.limit_after_mm:.4f} mm "
+            f"and are kept{still}; residual {self.rms_before_mm:.4f} mm RMS on the readings kept "
             f"before, {self.rms_after_mm:.4f} mm now"
         )
 
