@@ -144,6 +144,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"  note: {note}")
     for name, entry in diag.effect_parameters.items():
         for pname, v in entry.items():
+            if v.get("determined") is False:
+                print(f"  {name}: {pname} {v['why']}")
+                continue
             std = "" if v["std"] is None else f" +- {v['std']:.3g}"
             value = v["value"] if isinstance(v["value"], str) else f"{v['value']:.4g}"
             print(f"  {name}: {pname} = {value}{std} {v['unit']}")

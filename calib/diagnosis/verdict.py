@@ -4,7 +4,9 @@
   per-pose held-out improvement (a few poses much better cannot hide many slightly worse).
 * ``refusal``: a sign physics fixes (play, compliance >= 0) that the unconstrained fit
   violates by more than two standard errors: the candidate is refused, not reported.
-* ``effect_parameters``: values in display units with standard errors, the shape too.
+* ``effect_parameters``: values in display units with standard errors, the shape too; a
+  parameter the data do not determine (redundant with the geometry or another effect
+  parameter) gets no value, ``determined: false`` and why.
 """
 
 from __future__ import annotations
@@ -15,10 +17,14 @@ import numpy as np
 
 from calib.diagnosis.candidate import Candidate
 from calib.diagnosis.context import Context
-from calib.diagnosis.fit import Evaluation, uncertainty
+from calib.diagnosis.fit import Evaluation, uncertainty, undetermined
 from calib.diagnosis.problem import SCHEMES, Problem
 
 REFUSE_Z = 2.0
+LOOSE = (
+    "not determined by these data: its effect is one of the geometry's or the other effect "
+    "parameters' (identify --with fixes it as redundant)"
+)
 
 
 @dataclass(frozen=True)
@@ -94,6 +100,7 @@ def effect_parameters(
     (the offsets of the reflectors relative to each other), its std errors propagated, and a
     ``note`` says so."""
     u = uncertainty(prob, ctx, cands, ev)
+    loose = undetermined(prob, ctx, cands, ev)
     out, start = {}, 0
     for i, (c, k) in enumerate(zip(cands, ev.sizes, strict=True)):
         theta = ev.fit.theta[start : start + k]
