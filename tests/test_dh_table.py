@@ -294,7 +294,9 @@ def test_committed_three_reflector_arm_equals_regeneration():
     xml = (ROOT / "models" / "arm6r_3targets.xml").read_text()
     assert xml_differences(xml, build_xml(table, "arm6r_3targets")) == []
     toml = (ROOT / "models" / "arm6r_3targets.params.toml").read_text()
-    assert toml_differences(toml, build_parameters(table, "arm6r_3targets", base_errors=False)) == []
+    assert (
+        toml_differences(toml, build_parameters(table, "arm6r_3targets", base_errors=False)) == []
+    )
 
 
 def test_committed_arm6r_kinematics_and_home():

@@ -56,9 +56,9 @@ def _arm(tmp: Path) -> tuple[Path, Path, Path, Mechanism]:
 
 def _base_frame_data(tmp: Path, tilt_deg: float, outlier_mm: float = 0.0) -> tuple[Path, ...]:
     """Readings in the base frame of an arm whose base is tilted by ``tilt_deg`` and shifted
-    (not at all for 0; besides DH errors of a built arm): 200 poses near one configuration and 6 with the
-    first joint turned far from it (where a base tilt shows most), then 20 test poses near
-    the configuration; ``outlier_mm`` moves the 10th reading that far (a gross error)."""
+    (neither for 0), besides DH errors of a built arm: 200 poses near one configuration and
+    6 with the first joint turned far from it (where a base tilt shows most), then 20 test
+    poses near it; ``outlier_mm`` moves the 10th reading that far (a gross error)."""
     xml, small, full, nominal = _arm(tmp)
     params = load_parameter_set(full, nominal.model)
     rng = np.random.default_rng(2)
@@ -90,7 +90,7 @@ def _base_frame_data(tmp: Path, tilt_deg: float, outlier_mm: float = 0.0) -> tup
 def test_generated_error_models_hold_the_base_placement(tmp_path):
     """The DH generator's default and the URDF generator's complete model can move the
     machine rigidly; a DH model made with --no-base-errors cannot."""
-    xml, small, full, nominal = _arm(tmp_path)
+    xml, small, full, _ = _arm(tmp_path)
     q = HOME + np.random.default_rng(0).uniform(-1, 1, (30, 6))
     for errors, holds in ((small, False), (full, True)):
         model = model_from_files(str(xml), str(errors))

@@ -57,6 +57,7 @@ from calib.data import DatasetError, load_result, read_dataset, result_text, sid
 from calib.exceptions import CalibError
 from calib.fit import (
     DEFAULT_MAX_RATIO,
+    DETERMINED_Z,
     EXIT_BAD_INPUT,
     EXIT_OK,
     CalibrationRun,
@@ -114,7 +115,8 @@ def _print_run(run: CalibrationRun) -> None:
     if run.weak:
         print(
             f"{len(run.weak)} parameter(s) weakly identified (standard error above half the "
-            "physical range); more poses over a larger volume determine them better"
+            f"physical range, value within {DETERMINED_Z:g} standard errors of zero); more "
+            "poses over a larger volume determine them better"
         )
     print(regularisation_text(run))
     for group in run.groups[:5]:

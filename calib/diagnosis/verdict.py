@@ -126,6 +126,8 @@ def effect_parameters(
                 "std": float(std[j] * f) if np.isfinite(std[j]) else None,
                 "unit": c.units[j],
             }
+            if loose[start + j]:  # no value: any would fit the data as well
+                entry[c.parameters[j]].update(value=None, std=None, determined=False, why=LOOSE)
         if c.shaped:
             s, sd = ev.shapes[i], u.shape_std[i]
             entry[c.shape_name] = {

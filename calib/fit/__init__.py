@@ -25,6 +25,7 @@ __all__, __getattr__, __dir__ = face(
             "stats_mm",
         ),
         "prior": (
+            "DETERMINED_Z",
             "PriorSpec",
             "correlation_matrix",
         ),

@@ -36,6 +36,7 @@ from twin.parameters import Parameter, ParameterSet
 if TYPE_CHECKING:
     from calib.data.dataset import Dataset
     from calib.fit.identification import IdentificationResult
+    from calib.fit.observations import Observations
 
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 # a rigid motion counts as held by the error model when its part outside the span of the
@@ -169,16 +170,19 @@ class FullerModel:
 def fuller_or_not(
     model: CalibrationModel,
     picked: Dataset,
-    commands: np.ndarray,
+    obs: Observations,
     result: IdentificationResult,
     choice: Any,
     fit: Callable[[CalibrationModel], tuple[IdentificationResult, Any]],
 ) -> tuple[CalibrationModel, IdentificationResult, Any, FullerModel | None]:
     """(model, result, ``fit``'s second answer, why) of the fit with the error model's fuller
     variant when it explains readings the fit of ``model`` (``result``) rejects as gross
-    outliers; else of the fit as it was (why: None). ``fit(model)`` fits a model to the
-    observations of ``picked`` (their ``commands``)."""
-    added = base_placement(model, result.values, commands)
+    outliers; else of the fit as it was (why: None). ``fit(model)`` fits a model to ``obs``,
+    the observations of ``picked``. Tried for readings in the base frame only (a tracker's
+    registration absorbs the base's placement)."""
+    if not result.rejected or obs.frame != "base":
+        return model, result, choice, None
+    added = base_placement(model, result.values, obs.commands)
     if not added:
         return model, result, choice, None
     fuller = with_parameters(model, added)

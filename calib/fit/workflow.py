@@ -102,11 +102,9 @@ def calibrate(
     obs = bind_dataset(model.nominal, picked)
     accuracy = declared_accuracy(sigma_mm, picked.tracker)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
-    fit = _Fitter(obs, unidentifiable, options, prior_spec, regularise)
-    result, choice = fit(model)
-    fuller = None
-    if result.rejected and obs.frame == "base":  # before readings are rejected: a fuller model
-        model, result, choice, fuller = fuller_or_not(model, picked, obs.commands, result, choice, fit)
+    result, choice = (fit := _Fitter(obs, unidentifiable, options, prior_spec, regularise))(model)
+    # before readings are rejected as gross outliers: the error model's fuller variant
+    model, result, choice, fuller = fuller_or_not(model, picked, obs, result, choice, fit)
     try:
         verdict, residual, structure = judge(model, obs, result, accuracy, max_ratio, picked)
     except TwinError as exc:  # the estimate went where the machine does not close
@@ -126,7 +124,9 @@ def calibrate(
         result=result,
         verdict=verdict,
         residual=residual,
-        weak=weakly_identified(result.names, result.std_errors, model.params, prior_spec),
+        weak=weakly_identified(
+            result.names, result.std_errors, model.params, prior_spec, result.values
+        ),
         groups=collinear_groups(est_names, cov_k),
         correlations=correlation_pairs(est_names, cov_k),
         prior_spec=prior_spec,
