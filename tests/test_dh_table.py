@@ -349,7 +349,8 @@ def test_three_reflector_variant(tmp_path):
     mech = Mechanism.from_xml(tmp_path / "arm6r_3targets.xml")
     assert mech.target_names == ("target_1", "target_2", "target_3")
     params = load_parameter_set(tmp_path / "arm6r_3targets.params.toml", mech.model)
-    assert len(params) == 24 + 9 and params.names[-1] == "target_3.dz"
+    # the base's placement (6, by default), 4 DH errors x 6 rows, 3 reflectors x 3 offsets
+    assert len(params) == 6 + 24 + 9 and params.names[-1] == "target_3.dz"
     local = mech.target_local()
     np.testing.assert_allclose(np.linalg.norm(local[:, :2], axis=1), 0.05, atol=1e-8)
 

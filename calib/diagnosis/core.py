@@ -149,11 +149,13 @@ def diagnose(
     test: TestSet | None = None,
     max_effects: int = 3,
     registration: bool = False,
+    sigma_source: str = "typed",
 ) -> Diagnosis:
     """Diagnose the residual of a geometric calibration ``result`` on ``obs``.
 
     ``sigma_m``: the typed tracker noise per coordinate (None: from the repeats, given as
-    ``repeat_std_m`` over ``n_repeats``). ``order`` / ``time_s``: when each pose was measured.
+    ``repeat_std_m`` over ``n_repeats``), ``sigma_source`` where it came from. ``order`` /
+    ``time_s``: when each pose was measured.
     ``test``: poses that took no part in the fit (commands, base-frame readings, their order):
     an effect must lower their error too. ``min_gain``: the relative drop of the held-out RMS
     an effect must bring in every fold scheme; ``alpha``: the one-sided Wilcoxon level of the
@@ -170,7 +172,7 @@ def diagnose(
     r = (obs.measured - pred.targets).reshape(n_poses, -1) * keep
     n = int(keep.sum())
     p = int(result.estimated.sum())
-    noise = noise_level(sigma_m, repeat_std_m, n_repeats)
+    noise = noise_level(sigma_m, repeat_std_m, n_repeats, sigma_source)
     sum_sq = float(np.sum(r**2))
     p_value = chi_square_p(sum_sq, noise.sigma_m, n - p)
     geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p)

@@ -36,6 +36,8 @@ __all__, __getattr__, __dir__ = face(
             "rigid_motion_span",
         ),
         "verdict": (
+            "ASSUMED_SIGMA_MM",
+            "Accuracy",
             "DEFAULT_MAX_RATIO",
             "EXIT_BAD_INPUT",
             "EXIT_OK",
@@ -44,6 +46,7 @@ __all__, __getattr__, __dir__ = face(
             "MAX_SIGMA_MM",
             "Verdict",
             "implausible_estimates",
+            "noise_rule",
         ),
         "verify": (
             "Side",

@@ -42,9 +42,9 @@ from calib.fit.verdict import (
     DEFAULT_MAX_RATIO,
     Accuracy,
     Verdict,
-    declared_accuracy,
     implausible_estimates,
     judge_fit,
+    noise_rule,
 )
 from calib.fit.verdict_notes import with_notes
 from calib.fit.verify import Verification, verify
@@ -100,7 +100,7 @@ def calibrate(
     picked, selection = select_set(dataset, set_name, "calibration")
     used = set_name if set_name is not None else (CALIBRATION if picked is not dataset else None)
     obs = bind_dataset(model.nominal, picked)
-    accuracy = declared_accuracy(sigma_mm, picked.tracker)
+    accuracy = noise_rule(sigma_mm, picked)  # declared, else the repeats, else assumed
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
     result, choice = (fit := _Fitter(obs, unidentifiable, options, prior_spec, regularise))(model)
     # before readings are rejected as gross outliers: the error model's fuller variant
