@@ -77,6 +77,7 @@ from calib.diagnosis.verdict import (
     TestSet,
     effect_parameters,
     improvement,
+    physical_sentence,
     score_of,
     test_errors,
 )
@@ -218,7 +219,10 @@ def diagnose(
     )
     notes += [f"{k} refused: {why}" for k, why in sel.refused.items()]
     base, singles = sel.base, sel.singles
-    scores = {"none": score_of("none", base, prob, ctx, [], test_rms(base, []))}
+    before_stats = None if tr is None else stats_3d(tr.r)
+    # geometry alone on the test poses is the geometric calibration itself: "test before"
+    none_test = None if before_stats is None else before_stats["rms_mm"] * 1e-3
+    scores = {"none": score_of("none", base, prob, ctx, [], none_test)}
     for c in cands:
         ev = singles[c.name]
         scores[c.name] = score_of(
@@ -240,7 +244,6 @@ def diagnose(
         },
         structure_detail=structure_detail(r, keep, ctx),
     )
-    before_stats = None if tr is None else stats_3d(tr.r)
     if sel.chosen:
         ev, chosen = sel.current, sel.chosen
         names = [c.name for c in chosen]
@@ -300,7 +303,7 @@ def diagnose(
             **common,
             chosen=f"unexplained: correlated with {best_group}",
             reason=(
-                "no physical candidate lowers the held-out error, but a kernel correction "
+                f"{physical_sentence(base, singles, min_gain)}, but a kernel correction "
                 f"over {best_group} does ({_schemes(base)} -> "
                 + ", ".join(f"{s} {held[s]:.4g}" for s in SCHEMES)
                 + " mm)"
@@ -316,9 +319,9 @@ def diagnose(
     else:
         chosen = "unexplained"
         reason = (
-            f"the residual exceeds the noise (chi-square p = {p_value:.3g}) but no candidate, "
-            "and no kernel correction, lowers the held-out error; "
-            + describe(common["structure_detail"])
+            f"the residual exceeds the noise (chi-square p = {p_value:.3g}); "
+            f"{physical_sentence(base, singles, min_gain)}, and no kernel correction lowers "
+            "it; " + describe(common["structure_detail"])
         )
     if sel.why_not:
         best = min(singles.values(), key=lambda e: e.heldout_rms_mm())
