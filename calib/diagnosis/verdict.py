@@ -126,7 +126,9 @@ def effect_parameters(
                 "std": float(std[j] * f) if np.isfinite(std[j]) else None,
                 "unit": c.units[j],
             }
-            if loose[start + j]:  # no value: any would fit the data as well
+            # no value where any would fit the data as well (a rigid motion's share of the
+            # reflectors' offsets is already taken out above and said in the note)
+            if loose[start + j] and not note:
                 entry[c.parameters[j]].update(value=None, std=None, determined=False, why=LOOSE)
         if c.shaped:
             s, sd = ev.shapes[i], u.shape_std[i]
