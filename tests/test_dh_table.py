@@ -284,7 +284,8 @@ def test_committed_arm6r_equals_regeneration():
     xml = (ROOT / "models" / "arm6r.xml").read_text()
     assert xml_differences(xml, build_xml(table, "arm6r")) == []
     toml = (ROOT / "models" / "arm6r.params.toml").read_text()
-    assert toml_differences(toml, build_parameters(table, "arm6r")) == []
+    # generated before the base's placement was in the default error model
+    assert toml_differences(toml, build_parameters(table, "arm6r", base_errors=False)) == []
     assert xml_differences(xml, xml.replace('pos="0 0 0.43"', 'pos="0 0 0.430001"'))
 
 
@@ -293,7 +294,9 @@ def test_committed_three_reflector_arm_equals_regeneration():
     xml = (ROOT / "models" / "arm6r_3targets.xml").read_text()
     assert xml_differences(xml, build_xml(table, "arm6r_3targets")) == []
     toml = (ROOT / "models" / "arm6r_3targets.params.toml").read_text()
-    assert toml_differences(toml, build_parameters(table, "arm6r_3targets")) == []
+    assert (
+        toml_differences(toml, build_parameters(table, "arm6r_3targets", base_errors=False)) == []
+    )
 
 
 def test_committed_arm6r_kinematics_and_home():
@@ -346,7 +349,8 @@ def test_three_reflector_variant(tmp_path):
     mech = Mechanism.from_xml(tmp_path / "arm6r_3targets.xml")
     assert mech.target_names == ("target_1", "target_2", "target_3")
     params = load_parameter_set(tmp_path / "arm6r_3targets.params.toml", mech.model)
-    assert len(params) == 24 + 9 and params.names[-1] == "target_3.dz"
+    # the base's placement (6, by default), 4 DH errors x 6 rows, 3 reflectors x 3 offsets
+    assert len(params) == 6 + 24 + 9 and params.names[-1] == "target_3.dz"
     local = mech.target_local()
     np.testing.assert_allclose(np.linalg.norm(local[:, :2], axis=1), 0.05, atol=1e-8)
 
@@ -361,9 +365,12 @@ def test_command_line_writes_what_the_functions_build(tmp_path):
     assert (tmp_path / "arm6r.params.toml").read_text() == build_parameters(table, "arm6r")
     assert (tmp_path / "arm6r.xml").stat().st_mode & 0o777 != 0o600  # not mkstemp's mode
     args = [str(TABLE), "--name", "x", "--out-dir", str(tmp_path), "--no-target-errors"]
-    assert main([*args, "--base-errors"]) == 0
-    names = [e for e in (tmp_path / "x.params.toml").read_text().split("\n") if "name =" in e]
-    assert len(names) == 6 + 24 and "base.rz" in names[5]
+    for flags, n_base in (([], 6), (["--base-errors"], 6), (["--no-base-errors"], 0)):
+        assert main([*args, *flags]) == 0
+        text = (tmp_path / "x.params.toml").read_text()
+        names = [e for e in text.split("\n") if "name =" in e]
+        assert len(names) == n_base + 24  # 4 DH errors x 6 rows, no reflector offsets
+        assert ("base.rz" in names[5]) == (n_base == 6)
 
 
 # ----------------------------------------------------------------- bad input

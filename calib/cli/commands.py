@@ -61,6 +61,7 @@ from calib.data import DatasetError, load_result, read_dataset, result_text, sid
 from calib.exceptions import CalibError
 from calib.fit import (
     DEFAULT_MAX_RATIO,
+    DETERMINED_Z,
     EXIT_BAD_INPUT,
     EXIT_OK,
     CalibrationRun,
@@ -88,6 +89,8 @@ def _print_run(run: CalibrationRun) -> None:
         f"{r['rms_mm']:.4f} mm, mean {r['mean_mm']:.4f} mm, max {r['max_mm']:.4f} mm; "
         f"{res.iterations} iterations, converged: {res.converged}"
     )
+    if run.fuller is not None:
+        print(run.fuller.sentence())
     rows = rejected_rows(run)
     if rows:
         print(f"{len(rows)} reading(s) rejected as gross outliers:")
@@ -116,7 +119,8 @@ def _print_run(run: CalibrationRun) -> None:
     if run.weak:
         print(
             f"{len(run.weak)} parameter(s) weakly identified (standard error above half the "
-            "physical range); more poses over a larger volume determine them better"
+            f"physical range, value within {DETERMINED_Z:g} standard errors of zero); more "
+            "poses over a larger volume determine them better"
         )
     print(regularisation_text(run))
     for group in run.groups[:5]:
@@ -132,11 +136,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.out:
         content = result_content(run, args.model, args.errors, args.data)
         if args.with_effect:
-            base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
             content["with"] = str(args.with_effect)
-            content["added_parameters"] = [
-                parameter_entry(p) for p in run.model.params.parameters if p.name not in base
-            ]
+        # what --with and a kept fuller model added: what verify, compensate, export rebuild
+        base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
+        added = [parameter_entry(p) for p in run.model.params.parameters if p.name not in base]
+        if added:
+            content["added_parameters"] = added
         write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
 

@@ -11,13 +11,21 @@ import numpy as np
 
 from calib.cli.common import print_verdict, run_fit
 from calib.data import DatasetError, read_dataset, select_set, subset
-from calib.fit import EXIT_OK, CalibrationRun, rejected_rows
+from calib.fit import ASSUMED_SIGMA_MM, EXIT_OK, Accuracy, CalibrationRun, noise_rule, rejected_rows
 from calib.loop import effect_content
 from common.atomic_files import json_text
 from common.write_set import write_files
 
+# the noise source diagnose states when nothing gave one: identify's own assumption
+ASSUMED_NOISE = (
+    f"assumed {ASSUMED_SIGMA_MM:g} mm, as identify assumes: no --sigma-mm, no sidecar "
+    "tracker.sigma_mm, no repeat readings"
+)
 
-def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[object, str] | None:
+
+def _held_out_rows(
+    args: argparse.Namespace, fitted_ids: np.ndarray, model_name: str
+) -> tuple[object, str] | None:
     """The held-out rows for the diagnosis and a sentence saying which: ``--test-set NAME``
     of ``--test FILE`` (or of ``--data``); ``--test FILE`` alone: its 'test' rows if it has
     any, else the rows of the ``--data`` file not fitted, else all of FILE. None without
@@ -26,14 +34,14 @@ def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[objec
         return None
     same = not args.test or Path(args.test).resolve() == Path(args.data).resolve()
     path = args.data if same else args.test
-    ds = read_dataset(path, expected_model=run.model.nominal.name)
+    ds = read_dataset(path, expected_model=model_name)
     sets = [str(s) for s in ds.sets]
     if args.test_set:
         picked, sentence = select_set(ds, args.test_set, "the diagnosis's test")
     elif "test" in sets:
         picked, sentence = select_set(ds, "test", "the diagnosis's test")
     elif same:
-        fitted = {int(p) for p in run.dataset.pose_ids.tolist()}
+        fitted = {int(p) for p in fitted_ids.tolist()}
         mask = np.array([int(p) not in fitted for p in ds.pose_ids.tolist()])
         if not mask.any():
             raise DatasetError(
@@ -45,7 +53,7 @@ def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[objec
     else:
         picked, sentence = ds, f"all {ds.n_poses} poses of {path} used as the diagnosis's test"
     if same:
-        fitted = {int(p) for p in run.dataset.pose_ids.tolist()}
+        fitted = {int(p) for p in fitted_ids.tolist()}
         both = sorted(fitted & {int(p) for p in picked.pose_ids.tolist()})
         if both:
             raise DatasetError(
@@ -55,13 +63,13 @@ def _held_out_rows(args: argparse.Namespace, run: CalibrationRun) -> tuple[objec
     return picked, sentence
 
 
-def _diagnosis_test_set(args: argparse.Namespace, run: CalibrationRun):
-    """The held-out rows as a TestSet in the base frame (through the calibration's
-    registration for tracker-frame data), and the sentence saying which; (None, "")."""
+def _diagnosis_test_set(held: tuple[object, str] | None, run: CalibrationRun):
+    """The held-out rows (:func:`_held_out_rows`) as a TestSet in the base frame (through the
+    calibration's registration for tracker-frame data), and the sentence saying which;
+    (None, "")."""
     from calib.diagnosis import TestSet
     from calib.fit import bind_dataset
 
-    held = _held_out_rows(args, run)
     if held is None:
         return None, ""
     ds, sentence = held
@@ -83,16 +91,18 @@ def _diagnosis_test_set(args: argparse.Namespace, run: CalibrationRun):
     return test, sentence
 
 
-def _typed_sigma_mm(args: argparse.Namespace, run: CalibrationRun) -> float | None:
-    if args.sigma_mm is not None:
-        return args.sigma_mm
-    sigma = (run.dataset.tracker or {}).get("sigma_mm")
-    return None if sigma is None else float(sigma)
+def _checked_inputs(args: argparse.Namespace) -> tuple[tuple[object, str] | None, Accuracy]:
+    """What diagnose needs besides the fit, checked before it: the held-out rows and the
+    noise level (identify's rule: declared, else the repeats, else the same assumption)."""
+    data = read_dataset(args.data)
+    picked, _ = select_set(data, args.set, "calibration")
+    return _held_out_rows(args, picked.pose_ids, data.model), noise_rule(args.sigma_mm, picked)
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     from calib.diagnosis import diagnose
 
+    held, accuracy = _checked_inputs(args)  # before the fit: a wrong input costs no fit
     run = run_fit(args)
     if isinstance(run, int):
         return run
@@ -114,17 +124,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     obs = run.obs
     if run.result.registration is not None:  # the diagnosis works in the base frame
         obs = replace(obs, measured=run.result.registration.to_base(obs.measured), frame="base")
-    test, test_sentence = _diagnosis_test_set(args, run)
+    test, test_sentence = _diagnosis_test_set(held, run)
     if test_sentence:
         print(test_sentence)
     elif "test" in {str(x) for x in read_dataset(args.data).sets} and args.set != "test":
         print("note: the data's 'test' rows were not used; --test-set test holds them out")
-    typed = _typed_sigma_mm(args, run)
+    typed = None if accuracy.source == "repeats" else accuracy.sigma_mm
     ds = run.dataset
-    if typed is None and ds.n_repeats < 2:
-        raise DatasetError(
-            "no noise level: give --sigma-mm, a sidecar tracker.sigma_mm, or data with repeats"
-        )
     diag = diagnose(
         run.model,
         obs,
@@ -137,6 +143,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         tracker_position_m=None if head is None else np.asarray(head, dtype=float) * 1e-3,
         test=test,
         registration=run.result.registration is not None,
+        sigma_source="typed" if accuracy.source != "assumed" else ASSUMED_NOISE,
     )
     noise = diag.noise.as_dict() if diag.noise is not None else {}
     print(
@@ -149,6 +156,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"  note: {note}")
     for name, entry in diag.effect_parameters.items():
         for pname, v in entry.items():
+            if v.get("determined") is False:
+                print(f"  {name}: {pname} {v['why']}")
+                continue
             std = "" if v["std"] is None else f" +- {v['std']:.3g}"
             value = v["value"] if isinstance(v["value"], str) else f"{v['value']:.4g}"
             print(f"  {name}: {pname} = {value}{std} {v['unit']}")

@@ -77,6 +77,7 @@ from calib.diagnosis.verdict import (
     TestSet,
     effect_parameters,
     improvement,
+    physical_sentence,
     score_of,
     test_errors,
 )
@@ -149,11 +150,13 @@ def diagnose(
     test: TestSet | None = None,
     max_effects: int = 3,
     registration: bool = False,
+    sigma_source: str = "typed",
 ) -> Diagnosis:
     """Diagnose the residual of a geometric calibration ``result`` on ``obs``.
 
     ``sigma_m``: the typed tracker noise per coordinate (None: from the repeats, given as
-    ``repeat_std_m`` over ``n_repeats``). ``order`` / ``time_s``: when each pose was measured.
+    ``repeat_std_m`` over ``n_repeats``), ``sigma_source`` where it came from. ``order`` /
+    ``time_s``: when each pose was measured.
     ``test``: poses that took no part in the fit (commands, base-frame readings, their order):
     an effect must lower their error too. ``min_gain``: the relative drop of the held-out RMS
     an effect must bring in every fold scheme; ``alpha``: the one-sided Wilcoxon level of the
@@ -170,7 +173,7 @@ def diagnose(
     r = (obs.measured - pred.targets).reshape(n_poses, -1) * keep
     n = int(keep.sum())
     p = int(result.estimated.sum())
-    noise = noise_level(sigma_m, repeat_std_m, n_repeats)
+    noise = noise_level(sigma_m, repeat_std_m, n_repeats, sigma_source)
     sum_sq = float(np.sum(r**2))
     p_value = chi_square_p(sum_sq, noise.sigma_m, n - p)
     geo = model.jacobian(values, pred)[:, result.estimated].reshape(n_poses, -1, p)
@@ -216,7 +219,10 @@ def diagnose(
     )
     notes += [f"{k} refused: {why}" for k, why in sel.refused.items()]
     base, singles = sel.base, sel.singles
-    scores = {"none": score_of("none", base, prob, ctx, [], test_rms(base, []))}
+    before_stats = None if tr is None else stats_3d(tr.r)
+    # geometry alone on the test poses is the geometric calibration itself: "test before"
+    none_test = None if before_stats is None else before_stats["rms_mm"] * 1e-3
+    scores = {"none": score_of("none", base, prob, ctx, [], none_test)}
     for c in cands:
         ev = singles[c.name]
         scores[c.name] = score_of(
@@ -238,7 +244,6 @@ def diagnose(
         },
         structure_detail=structure_detail(r, keep, ctx),
     )
-    before_stats = None if tr is None else stats_3d(tr.r)
     if sel.chosen:
         ev, chosen = sel.current, sel.chosen
         names = [c.name for c in chosen]
@@ -298,7 +303,7 @@ def diagnose(
             **common,
             chosen=f"unexplained: correlated with {best_group}",
             reason=(
-                "no physical candidate lowers the held-out error, but a kernel correction "
+                f"{physical_sentence(base, singles, min_gain)}, but a kernel correction "
                 f"over {best_group} does ({_schemes(base)} -> "
                 + ", ".join(f"{s} {held[s]:.4g}" for s in SCHEMES)
                 + " mm)"
@@ -314,9 +319,9 @@ def diagnose(
     else:
         chosen = "unexplained"
         reason = (
-            f"the residual exceeds the noise (chi-square p = {p_value:.3g}) but no candidate, "
-            "and no kernel correction, lowers the held-out error; "
-            + describe(common["structure_detail"])
+            f"the residual exceeds the noise (chi-square p = {p_value:.3g}); "
+            f"{physical_sentence(base, singles, min_gain)}, and no kernel correction lowers "
+            "it; " + describe(common["structure_detail"])
         )
     if sel.why_not:
         best = min(singles.values(), key=lambda e: e.heldout_rms_mm())

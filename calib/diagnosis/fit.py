@@ -149,3 +149,38 @@ def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluat
         sd = float(np.sqrt(2 * sigma2 / curv)) if curv > 0 else float("nan")
         shape_std.append(s * sd if c.shape_log else sd)
     return Uncertainty(theta, std, tuple(shape_std), sigma2, full_cov)
+
+
+# a scaled singular value below this fraction of the largest is zero: identify's rank rule
+# (calib.analysis.identifiability.RANK_RTOL), so that what identify --with would fix as
+# redundant is what the diagnosis does not print a value for
+DETERMINED_RTOL = 1e-9
+
+
+def undetermined(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluation) -> np.ndarray:
+    """Per effect parameter (in the order of ``ev.fit.theta``), whether the data leave it
+    undetermined: its column (at the chosen shapes, all poses) lies in the span of the
+    geometry's columns and the other effect parameters' (dropping it does not lower the
+    rank of the unit-scaled columns). A parameter without a column (the data do not see
+    it) is not counted here: it keeps value 0 without a standard error."""
+    everything = np.ones(ctx.n_poses, bool)
+    xs = [c.design(ctx, s) for c, s in zip(cands, ev.shapes, strict=True)]
+    q, _ = prob.basis(everything)
+    _, rt = prob.rows(everything)
+    xt = _flat(xs, everything).reshape(len(rt), -1)
+    norms = np.linalg.norm(xt, axis=0)
+    out = np.zeros(len(norms), dtype=bool)
+    live = np.flatnonzero(norms > 0)
+    if live.size == 0:
+        return out
+    cols = np.hstack([q, xt[:, live] / norms[live]])
+    r = np.linalg.qr(cols, mode="r")  # the same singular values in as many rows as columns
+
+    def rank(a: np.ndarray) -> int:
+        s = np.linalg.svd(a, compute_uv=False)
+        return int(np.sum(s > DETERMINED_RTOL * s[0])) if s.size and s[0] > 0 else 0
+
+    full = rank(r)
+    for i, j in enumerate(live):
+        out[j] = rank(np.delete(r, q.shape[1] + i, axis=1)) == full
+    return out

@@ -37,10 +37,14 @@ class NoiseLevel:
 
 
 def noise_level(
-    typed_m: float | None, repeat_std_m: np.ndarray | None = None, n_repeats: int = 1
+    typed_m: float | None,
+    repeat_std_m: np.ndarray | None = None,
+    n_repeats: int = 1,
+    typed_source: str = "typed",
 ) -> NoiseLevel:
     """The per-coordinate noise of the averaged readings, and what the repeats say of a typed
-    sigma. ``repeat_std_m`` (P, T, 3) is the per-reading sample scatter over ``n_repeats``."""
+    sigma. ``repeat_std_m`` (P, T, 3) is the per-reading sample scatter over ``n_repeats``;
+    ``typed_source`` names where a typed sigma came from ("assumed" when nothing gave one)."""
     rep = None
     if repeat_std_m is not None and n_repeats > 1:
         s = np.asarray(repeat_std_m, dtype=float)
@@ -51,7 +55,8 @@ def noise_level(
         raise ValueError("no noise level: give a tracker sigma or data with repeat readings")
     notes = []
     if rep is None:
-        return NoiseLevel(float(typed_m) / np.sqrt(n_repeats), "typed", typed_m, None, n_repeats)
+        sigma = float(typed_m) / np.sqrt(n_repeats)
+        return NoiseLevel(sigma, typed_source, typed_m, None, n_repeats)
     sigma = rep / np.sqrt(n_repeats)
     if typed_m is None:
         return NoiseLevel(sigma, "repeats", None, rep, n_repeats)

@@ -4,7 +4,9 @@
   per-pose held-out improvement (a few poses much better cannot hide many slightly worse).
 * ``refusal``: a sign physics fixes (play, compliance >= 0) that the unconstrained fit
   violates by more than two standard errors: the candidate is refused, not reported.
-* ``effect_parameters``: values in display units with standard errors, the shape too.
+* ``effect_parameters``: values in display units with standard errors, the shape too; a
+  parameter the data do not determine (redundant with the geometry or another effect
+  parameter) gets no value, ``determined: false`` and why.
 """
 
 from __future__ import annotations
@@ -15,10 +17,14 @@ import numpy as np
 
 from calib.diagnosis.candidate import Candidate
 from calib.diagnosis.context import Context
-from calib.diagnosis.fit import Evaluation, uncertainty
+from calib.diagnosis.fit import Evaluation, uncertainty, undetermined
 from calib.diagnosis.problem import SCHEMES, Problem
 
 REFUSE_Z = 2.0
+LOOSE = (
+    "not determined by these data: its effect is one of the geometry's or the other effect "
+    "parameters' (identify --with fixes it as redundant)"
+)
 
 
 @dataclass(frozen=True)
@@ -94,6 +100,7 @@ def effect_parameters(
     (the offsets of the reflectors relative to each other), its std errors propagated, and a
     ``note`` says so."""
     u = uncertainty(prob, ctx, cands, ev)
+    loose = undetermined(prob, ctx, cands, ev)
     out, start = {}, 0
     for i, (c, k) in enumerate(zip(cands, ev.sizes, strict=True)):
         theta = ev.fit.theta[start : start + k]
@@ -119,6 +126,10 @@ def effect_parameters(
                 "std": float(std[j] * f) if np.isfinite(std[j]) else None,
                 "unit": c.units[j],
             }
+            # no value where any would fit the data as well (a rigid motion's share of the
+            # reflectors' offsets is already taken out above and said in the note)
+            if loose[start + j] and not note:
+                entry[c.parameters[j]].update(value=None, std=None, determined=False, why=LOOSE)
         if c.shaped:
             s, sd = ev.shapes[i], u.shape_std[i]
             entry[c.shape_name] = {
@@ -171,4 +182,29 @@ def score_of(
         test_rms_mm=None if test_rms is None else test_rms * 1e3,
         shape=float(ev.shapes[0]) if ev.shapes else float("nan"),
         refused=refused,
+    )
+
+
+def lowering(base: Evaluation, singles: dict[str, Evaluation]) -> list[tuple[str, float]]:
+    """The candidates whose held-out RMS is below geometry alone's in every fold scheme, with
+    their pooled held-out RMS (mm per coordinate), best first."""
+    out = [
+        (name, ev.heldout_rms_mm())
+        for name, ev in singles.items()
+        if all(ev.heldout_rms_mm(s) < base.heldout_rms_mm(s) for s in SCHEMES)
+    ]
+    return sorted(out, key=lambda item: item[1])
+
+
+def physical_sentence(base: Evaluation, singles: dict[str, Evaluation], min_gain: float) -> str:
+    """Whether physical candidates lower the held-out error, in the numbers of the table."""
+    lower = lowering(base, singles)
+    if not lower:
+        return "no physical candidate lowers the held-out error"
+    shown = ", ".join(f"{n} {v:.4g} mm" for n, v in lower[:4]) + (" ..." if len(lower) > 4 else "")
+    return (
+        f"{len(lower)} physical candidate(s) lower the held-out error (geometry alone "
+        f"{base.heldout_rms_mm():.4g} mm; {shown}) but none by the {100 * min_gain:g} % in "
+        "every fold scheme, significant pose by pose and no worse on the test poses, that "
+        "naming one requires"
     )

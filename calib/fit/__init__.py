@@ -25,6 +25,7 @@ __all__, __getattr__, __dir__ = face(
             "stats_mm",
         ),
         "prior": (
+            "DETERMINED_Z",
             "PriorSpec",
             "correlation_matrix",
         ),
@@ -35,6 +36,8 @@ __all__, __getattr__, __dir__ = face(
             "rigid_motion_span",
         ),
         "verdict": (
+            "ASSUMED_SIGMA_MM",
+            "Accuracy",
             "DEFAULT_MAX_RATIO",
             "EXIT_BAD_INPUT",
             "EXIT_OK",
@@ -43,6 +46,7 @@ __all__, __getattr__, __dir__ = face(
             "MAX_SIGMA_MM",
             "Verdict",
             "implausible_estimates",
+            "noise_rule",
         ),
         "verify": (
             "Side",
@@ -53,10 +57,12 @@ __all__, __getattr__, __dir__ = face(
             "CalibrationRun",
             "FitFailed",
             "calibrate",
+            "verify_result",
+        ),
+        "run_content": (
             "regularisation_text",
             "rejected_rows",
             "result_content",
-            "verify_result",
         ),
     },
 )

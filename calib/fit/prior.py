@@ -21,6 +21,9 @@ from typing import Any
 import numpy as np
 
 WEAK_FRACTION = 0.5  # weakly identified: std error above this fraction of the prior range
+# ... unless the value lies this many standard errors from zero (its sign and size are then
+# determined to a third or better, whatever the physical range says)
+DETERMINED_Z = 3.0
 COLLINEAR_R = 0.95
 DEFAULT_RANGE = {"length": 1.0, "angle": 0.1}  # mm, deg: assembly errors of a built machine
 # an actuator's scale (ppm): a screw's lead or a gear ratio is within a few hundred ppm, a
@@ -120,16 +123,23 @@ def weakly_identified(
     std_si: np.ndarray,
     params: Any,
     ranges: PriorSpec | None = None,
+    values_si: np.ndarray | None = None,
 ) -> list[dict]:
     """Estimated parameters whose standard error exceeds half their physical range
-    (``params``: the ParameterSet, for each one's kind and display unit)."""
+    (``params``: the ParameterSet, for each one's kind and display unit) and, given their
+    ``values_si``, whose value lies within ``DETERMINED_Z`` standard errors of zero (an
+    estimate of many standard errors is determined, whatever the range)."""
     width = params.to_display(physical_ranges(params, ranges))
     shown = params.to_display(np.nan_to_num(np.asarray(std_si, dtype=float), nan=0.0))
+    z = np.zeros(len(names))
+    if values_si is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = np.abs(np.asarray(values_si, dtype=float)) / np.asarray(std_si, dtype=float)
     out = []
-    for name, s, sh, rng, unit in zip(
-        names, std_si, shown, width, params.display_units(), strict=True
+    for name, s, sh, rng, unit, zk in zip(
+        names, std_si, shown, width, params.display_units(), z, strict=True
     ):
-        if np.isfinite(s) and sh > WEAK_FRACTION * rng:
+        if np.isfinite(s) and sh > WEAK_FRACTION * rng and not zk >= DETERMINED_Z:
             out.append({"name": name, "std": float(sh), "prior_range": float(rng), "unit": unit})
     return out
 

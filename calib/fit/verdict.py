@@ -68,9 +68,15 @@ class Accuracy:
             )
 
 
-def declared_accuracy(cli_sigma_mm: float | None, tracker_info: dict[str, Any] | None) -> Accuracy:
-    """The command line's ``--sigma-mm``, else the sidecar's ``tracker.sigma_mm``, else an
-    assumed 0.05 mm (said so in the output)."""
+def declared_accuracy(
+    cli_sigma_mm: float | None,
+    tracker_info: dict[str, Any] | None,
+    repeats_sigma_mm: float | None = None,
+) -> Accuracy:
+    """The noise level per coordinate of one reading, by the one rule identify and diagnose
+    share: declared (the command line's ``--sigma-mm``, else the sidecar's
+    ``tracker.sigma_mm``), else the scatter of the repeat readings (``repeats_sigma_mm``),
+    else an assumed ``ASSUMED_SIGMA_MM`` (said so in the output)."""
     if cli_sigma_mm is not None:
         return Accuracy(float(cli_sigma_mm), "command line")
     value = (tracker_info or {}).get("sigma_mm")
@@ -78,7 +84,24 @@ def declared_accuracy(cli_sigma_mm: float | None, tracker_info: dict[str, Any] |
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"the sidecar's tracker.sigma_mm must be a number, got {value!r}")
         return Accuracy(float(value), "dataset sidecar")
+    if repeats_sigma_mm is not None and repeats_sigma_mm > 0:
+        return Accuracy(float(repeats_sigma_mm), "repeats")
     return Accuracy(ASSUMED_SIGMA_MM, "assumed")
+
+
+def noise_rule(cli_sigma_mm: float | None, dataset: Any) -> Accuracy:
+    """:func:`declared_accuracy` of a Dataset: its sidecar, then its repeats."""
+    spread = repeats_sigma_mm(dataset.repeat_std, dataset.n_repeats)
+    return declared_accuracy(cli_sigma_mm, dataset.tracker, spread)
+
+
+def repeats_sigma_mm(repeat_std_m: np.ndarray | None, n_repeats: int) -> float | None:
+    """The pooled per-coordinate scatter of one reading over its repeats (mm), if any."""
+    if repeat_std_m is None or n_repeats < 2:
+        return None
+    s = np.asarray(repeat_std_m, dtype=float)
+    s = s[np.isfinite(s)]
+    return float(np.sqrt(np.mean(s**2))) * 1e3 if s.size and np.any(s > 0) else None
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,11 @@
 """Serial arms from their DH table (CSV): an MJCF model and its error model, one command.
 
     python -m twin.formats.dh_table TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
-        [--no-target-errors] [--base-errors]
+        [--no-target-errors] [--no-base-errors]
 
 writes ``DIR/NAME.xml`` and ``DIR/NAME.params.toml`` (atomically). ``twin.formats.dh_mjcf`` says
-how the model is built and which parameter is which.
+how the model is built and which parameter is which. The error model holds the base's
+placement in the world (``base.*``) unless ``--no-base-errors``.
 
 Table format (UTF-8 CSV; blank lines and lines starting with ``#`` are skipped)::
 
@@ -239,8 +240,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--base-errors",
-        action="store_true",
-        help="add base.dx..base.rz (redundant with tracker registration)",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="base.dx..base.rz, the base's placement in the world, in the error model (the "
+        "default: for readings in the base frame nothing else absorbs it; for tracker-frame "
+        "readings identify finds them redundant with the registration and fixes them); "
+        "--no-base-errors leaves them out",
     )
     args = ap.parse_args(argv)
     if not _NAME.match(args.name):
