@@ -111,13 +111,13 @@ def choose_fixed(
     fixed_arr = np.array(sorted(fixed), dtype=int)
     partners: dict[int, tuple[int, ...]] = {}
     with_reg: dict[int, bool] = {}
-    for j in fixed_arr:
+    # the null direction that moves each fixed member alone (one solve for all of them)
+    directions = v0 @ np.linalg.lstsq(v0[fixed_arr], np.eye(len(fixed_arr)), rcond=None)[0]
+    for k, j in enumerate(fixed_arr):
         if zero[j]:
             partners[int(j)], with_reg[int(j)] = (), False
             continue
-        e = np.zeros(len(fixed_arr))
-        e[np.searchsorted(fixed_arr, j)] = 1.0
-        direction = v0 @ np.linalg.lstsq(v0[fixed_arr], e, rcond=None)[0]
+        direction = directions[:, k]
         size = np.abs(direction)
         others = [
             int(i)
