@@ -98,8 +98,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         return run
     print(run.selection)
     if not run.verdict.ok:  # only what a user must fix: data errors, no convergence
+        cause = (
+            "it did not converge: give it more iterations (--max-iterations N)"
+            if run.verdict.status == "not_converged"
+            else "fix the data first"
+        )
         print(
-            "the geometric fit the diagnosis starts from is not usable; fix the data first",
+            f"the geometric fit the diagnosis starts from is not usable; {cause}",
             file=sys.stderr,
         )
         print_verdict(run.verdict)

@@ -48,6 +48,17 @@ class LMOptions:
     geodesic: bool = True
     geodesic_h: float = 0.1
     geodesic_ratio: float = 0.75
+    # a settled cost: over the last ``settle_window`` accepted steps the cost fell by at most
+    # ``settle_rtol`` of itself in all, and the undamped step predicts no more than that
+    # either. A fit creeping along a flat valley (weak directions) meets neither the step
+    # nor the per-step cost test for hundreds of iterations while its cost is already known
+    # to far below the noise: 1e-9 of the cost is a chi-square change below 1e-9 x the
+    # degrees of freedom (a millionth of a standard error at 1e3 readings), nothing the
+    # data can tell. A quadratically converging fit drops its predicted decrease from 1e-9
+    # below ``predicted_rtol`` in one or two steps, so it never waits for the window.
+    # 0 disables the test
+    settle_window: int = 10
+    settle_rtol: float = 1e-9
 
 
 # a gain ratio below this (or a rejected trial): the quadratic model missed, the path is
@@ -102,10 +113,14 @@ def levenberg_marquardt(
         js = jac / scale
         a = js.T @ js
         g = js.T @ r
-        if _gauss_newton_decrease(a, g) <= opt.predicted_rtol * cost:
+        gn_decrease = _gauss_newton_decrease(a, g)
+        if gn_decrease <= opt.predicted_rtol * cost:
             # not even the undamped step could lower the cost by more than the evaluation's
             # round-off: converged (trial steps would only be rejected, raising the damping)
             return LMResult(x, r, jac, cost, it - 1, True, history, "converged")
+        settled = _settled(history, gn_decrease, opt)
+        if settled:
+            return LMResult(x, r, jac, cost, it - 1, True, history, f"cost settled: {settled}")
         accepted = False
         while not accepted:
             damped = a + damping * np.eye(len(x))
@@ -150,7 +165,39 @@ def levenberg_marquardt(
                         f"Levenberg-Marquardt stalled at iteration {it}: no step decreases "
                         f"the cost {cost:.4g}"
                     )
+    scale = np.linalg.norm(jac, axis=0)
+    js = jac / np.where(scale > 0, scale, 1.0)
+    settled = _settled(history, _gauss_newton_decrease(js.T @ js, js.T @ r), opt)
+    if settled:
+        return LMResult(
+            x,
+            r,
+            jac,
+            cost,
+            opt.max_iterations,
+            True,
+            history,
+            f"stopped at the iteration limit with its cost settled: {settled}",
+        )
     return LMResult(x, r, jac, cost, opt.max_iterations, False, history, "iteration limit")
+
+
+def _settled(history: list[float], gn_decrease: float, opt: LMOptions) -> str:
+    """Why the cost has settled (``LMOptions.settle_window``), in words; "" if it has not:
+    the last window's accepted steps lowered it by at most ``settle_rtol`` of itself and the
+    undamped step predicts no more."""
+    w = opt.settle_window
+    if w <= 0 or len(history) <= w or not history[-1] > 0:
+        return ""
+    cost = history[-1]
+    fell = history[-1 - w] - cost
+    limit = opt.settle_rtol * cost
+    if not (fell <= limit and gn_decrease <= limit):
+        return ""
+    return (
+        f"the last {w} steps lowered the cost by {fell / cost:.2g} of itself and the "
+        f"Gauss-Newton step predicts {gn_decrease / cost:.2g} more"
+    )
 
 
 def _solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:

@@ -42,7 +42,7 @@ from calib.fit.registration import (
     registration_jacobian,
     rigid_motion_span,
 )
-from calib.fit.regularisation import SubspaceChoice, choose_subspace
+from calib.fit.regularisation import SubspaceChoice, choose_subspace, creeping_cuts
 from calib.fit.robust import (
     LOSS_WEIGHTS,
     Rejection,
@@ -142,19 +142,31 @@ def identify(
         if subspace == "full":
             return plain
         free = plain.estimated
+        ranges = physical_ranges(model.params)[free]
         choice = choose_subspace(
             plain.fit_jacobian,
             plain.fit_residual,
             plain.values[free] - (0.0 if x0 is None else np.asarray(x0, dtype=float)[free]),
-            physical_ranges(model.params)[free],
+            ranges,
             plain.fit_pose_of_row,
+            one_se=plain.converged,
         )
-        if choice.basis is None:
-            return replace(plain, subspace=choice)
-        res = _identify(
-            model, obs, x0, unidentifiable, options, robust, robust_options, None, choice.basis
-        )
-        return replace(res, subspace=choice)
+        res = plain
+        if choice.basis is not None:
+            res = _identify(
+                model, obs, x0, unidentifiable, options, robust, robust_options, None, choice.basis
+            )
+        if res.converged or plain.converged:
+            return replace(res, subspace=choice)
+        # no converged answer: the plain fit crept along its weak directions; the mildest
+        # truncation that converges, fitted from the start (calib.fit.regularisation)
+        for creep in creeping_cuts(plain.fit_jacobian, plain.fit_residual, ranges):
+            res = _identify(
+                model, obs, x0, unidentifiable, options, robust, robust_options, None, creep.basis
+            )
+            if res.converged:
+                return replace(res, subspace=creep)
+        return replace(plain, subspace=choice)
 
 
 def _analysed(jac: np.ndarray, names: tuple[str, ...]) -> IdentifiabilityReport:

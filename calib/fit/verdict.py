@@ -148,7 +148,12 @@ def judge_fit(
             "not_converged",
             EXIT_NOT_CONVERGED,
             f"FAILED: the fit did not converge ({convergence_message or 'no criterion met'}); "
-            f"residual {residual_rms_mm:.4f} mm RMS",
+            f"residual {residual_rms_mm:.4f} mm RMS"
+            + (
+                "; a fit still moving at its iteration limit may need more: --max-iterations N"
+                if "iteration limit" in convergence_message
+                else ""
+            ),
         )
     if implausible:
         shown = ", ".join(implausible[:5]) + (" ..." if len(implausible) > 5 else "")

@@ -98,6 +98,14 @@ def calibrate(
     picked, selection = select_set(dataset, set_name, "calibration")
     used = set_name if set_name is not None else (CALIBRATION if picked is not dataset else None)
     obs = bind_dataset(model.nominal, picked)
+    hints = _hints(model, obs)
+    if hints:  # on the readings against the nominal model: its words never follow a fit's path
+        raise FitFailed(
+            "the data look wrong (found on the readings against the nominal model, before "
+            "any fit), so a fit of them is not usable; fix the data first",
+            hints,
+            poor_data=True,
+        )
     accuracy = declared_accuracy(sigma_mm, picked.tracker)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
     ranges = physical_ranges(model.params, prior_spec)
@@ -219,17 +227,15 @@ def judge(
     order = np.arange(len(size)) if dataset is None or dataset.order is None else dataset.order
     probes = pose_probes(obs.commands, model.nominal.actuator_names, pred.targets.mean(1), order)
     structure = rank_correlations(size, probes)
-    noise = np.sqrt(3.0) * accuracy.sigma_mm
-    # a data error shows as a residual above the noise, or (in a tracker's frame, where a
-    # registration and shrunken links can follow readings in metres) as implausible estimates
-    hints = tuple(_hints(model, obs)) if stats.rms_mm > 2.0 * noise or odd else ()
+    # a named data error was looked for on the readings before the fit (calibrate): the
+    # verdict on the fit itself names none
     verdict = judge_fit(
         stats.rms_mm,
         result.converged,
         message,
         accuracy,
         max_ratio,
-        hints,
+        (),
         odd,
         reach_mm=float(np.max(np.linalg.norm(pred.targets, axis=-1))) * 1e3,
         structure=describe(structure),
@@ -370,6 +376,11 @@ def regularisation_text(run: CalibrationRun) -> str:
             f"worse ({sub.folds}-fold cross-validated 3D RMS {cv['none']:.4f} mm plain, "
             + ", ".join(f"{k} {v:.4f} mm" for k, v in cv.items() if k != "none")
             + ")"
+        )
+    if sub.reason:
+        return (
+            f"regularised: {sub.n_frozen} of {weak} kept at zero (minimum norm), the rest "
+            f"estimated: {sub.reason}"
         )
     return (
         f"regularised: {sub.n_frozen} of {weak} kept at zero (minimum norm), the rest "
