@@ -59,7 +59,7 @@ def _next_fixed(
     ``fixed`` and ``p_j`` the part of row j of ``v0`` outside the fixed rows' span, fixing j
     as well moves by sqrt(|c|^2 + (u_j - v0_j . c)^2 / |p_j|^2) (a Schur complement), which is
     what solving each candidate's least-squares problem gave, in O(n d) instead of O(n d^3)."""
-    n, d = v0.shape
+    d = v0.shape[1]
     if fixed:
         q = np.linalg.svd(v0[fixed], full_matrices=False)[2]  # (k, d) the fixed rows' span
         c = np.linalg.lstsq(v0[fixed], u[fixed], rcond=None)[0]
