@@ -92,7 +92,6 @@ def choose_fixed(
     ``jac @ dx = residual`` (m, n), each parameter measured in its physical range
     ``ranges`` (n,); ``zero`` marks columns with no effect (always fixed). ``unprojected``:
     the Jacobian before the registration was projected out of ``jac`` (tracker frame)."""
-    n = jac.shape[1]
     if n_null <= 0:
         return Redundancy((), {}, {})
     a_u = jac * ranges
