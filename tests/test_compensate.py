@@ -226,10 +226,12 @@ def test_identified_actuator_gains_turn_joint_values_into_commands(tmp_path, cap
     rot, pos = pose_to_frame(poses)
     assert np.max(np.abs(reached.tool_position - pos)) < 1e-9
     assert np.max(rotation_angle(np.swapaxes(reached.tool_rotation, 1, 2) @ rot)) < 1e-9
-    # export writes the geometry and names the gains for the controller
+    # export writes the geometry and the gains, as the actuators' gears (leg4 has none)
     exported = tmp_path / "h.xml"
     args = ["export", "--model", str(HEXAPOD), "--errors", str(HEXAPOD_ERRORS)]
     assert main([*args, "--result", str(result), "--out", str(exported)]) == 0
     said = capsys.readouterr().out
-    assert "leg1 +300 ppm" in said and "not in the MJCF" in said
-    assert "leg6 -400 ppm" in exported.read_text()
+    assert "5 actuator gains as gears" in said and "holds every identified parameter" in said
+    written = Mechanism.from_xml(exported)
+    gear = np.array([written.actuator_gear[i] for i in range(6)])
+    np.testing.assert_allclose(gear, 1.0 / (1.0 + ppm), rtol=1e-12)

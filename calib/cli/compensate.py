@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +55,9 @@ from calib.compensate import (
     compensate_program,
     load_identified_machine,
     nearest_targets,
+    nominal_commands_error,
     nominal_targets,
+    solve_each,
 )
 from calib.data import (
     DesiredPoses,
@@ -65,7 +67,13 @@ from calib.data import (
     read_desired_poses,
     read_program,
 )
-from calib.fit import EXIT_OK, EXIT_UNREACHABLE, model_from_files
+from calib.fit import (
+    EXIT_OK,
+    EXIT_UNREACHABLE,
+    Registration,
+    model_from_files,
+    nominal_registration,
+)
 from calib.loop import EffectFileError, load_effect
 from common.atomic_files import json_text
 from common.write_set import write_files
@@ -137,11 +145,19 @@ def nominal_orientation(machine: IdentifiedMachine) -> np.ndarray:
     return forward(nominal, nominal.home_qpos[nominal.actuator_qpos]).tool_rotation
 
 
-def positions_in_base(desired: DesiredPoses, frame: str, machine: IdentifiedMachine) -> np.ndarray:
-    """Desired tool points (N, 3) in the base frame (SI)."""
+def positions_in_base(
+    desired: DesiredPoses,
+    frame: str,
+    machine: IdentifiedMachine,
+    registration: Registration | None = None,
+) -> np.ndarray:
+    """Desired tool points (N, 3) in the base frame (SI); tracker-frame ones through
+    ``registration`` (default: the identified one)."""
     pos = np.array(desired.positions)
     if frame != "tracker":
         return pos
+    if registration is not None:
+        return registration.to_base(pos)
     if machine.registration is None:
         raise DesiredPosesError(
             f"--frame tracker: the result {machine.result.path} was identified from "
@@ -155,15 +171,17 @@ def poses_in_base(
     frame: str,
     machine: IdentifiedMachine,
     seed_rotations: np.ndarray | None = None,
+    registration: Registration | None = None,
 ) -> np.ndarray:
     """Desired poses (N, 6) in the base frame (SI, rpy); position-only rows take the seed's
-    tool orientation ``seed_rotations`` (N, 3, 3) (base frame), else the nominal home's."""
-    pos = positions_in_base(desired, frame, machine)
+    tool orientation ``seed_rotations`` (N, 3, 3) (base frame), else the nominal home's;
+    tracker-frame ones through ``registration`` (default: the identified one)."""
+    pos = positions_in_base(desired, frame, machine, registration)
     given = desired.has_orientation
     rot = np.empty((len(desired), 3, 3))
     rot[given] = matrix_from_rpy(desired.rpy[given])
     if frame == "tracker":
-        rot[given] = machine.registration.rotation @ rot[given]
+        rot[given] = (registration or machine.registration).rotation @ rot[given]
     rot[~given] = nominal_orientation(machine) if seed_rotations is None else seed_rotations[~given]
     rpy = rpy_from_matrix(rot)
     off = np.max(np.abs(matrix_from_rpy(rpy) - rot), axis=(1, 2))
@@ -266,7 +284,31 @@ def seeds_for(args: argparse.Namespace, machine: IdentifiedMachine, desired: Des
     return Seeds(None, None, None, {"source": "home"}, sentence)
 
 
-def _residual_line(comp: Compensation, own: str) -> str | None:
+def honest_before(
+    machine: IdentifiedMachine,
+    comp: Compensation,
+    model: Any,
+    nominal_commands: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[Compensation, str]:
+    """``comp`` with the nominal commands' error measured in the one frame every command
+    shares (calib.compensate.before), and that frame in words. ``nominal_commands``: (the
+    commands, their nominal configurations) when they are not ``comp``'s own."""
+    reg0 = nominal_registration(model, machine.result)
+    cmds, qpos = nominal_commands or (comp.nominal_commands, comp.nominal_qpos)
+    error, reflectors = nominal_commands_error(machine, cmds, qpos, reg0)
+    if machine.registration is None:
+        where = "base frame"
+    elif reg0 is None:
+        where = (
+            "not available: the result's calibration set, which defines the nominal model's "
+            "registration, is not readable"
+        )
+    else:
+        where = "tracker frame, the nominal model registered on the calibration set"
+    return replace(comp, nominal_error_m=error, nominal_reflector_error_m=reflectors), where
+
+
+def _residual_line(comp: Compensation, own: str, where: str = "") -> str | None:
     ok = comp.reachable
     if not ok.any():
         return None
@@ -279,8 +321,17 @@ def _residual_line(comp: Compensation, own: str) -> str | None:
     if e.size:
         line += (
             f"; {own} would leave {np.sqrt(np.mean(e * e)):.4f} mm RMS (max {np.max(e):.4f} mm) "
-            "by the identified model"
+            f"at the tool point by the identified model ({where})"
         )
+        refl = comp.nominal_reflector_error_m
+        if refl is not None:
+            f = refl[ok][np.isfinite(refl[ok])] * 1e3
+            line += (
+                f", {np.sqrt(np.mean(f * f)):.4f} mm RMS at the reflectors (what the tracker "
+                "measures; the tool point is extrapolated from them)"
+            )
+    elif where.startswith("not available"):
+        line += f"; what {own} would leave: {where}"
     return line
 
 
@@ -300,12 +351,20 @@ def run(args: argparse.Namespace) -> int:
         "forced": bool(args.force and identify_exit_code(machine.result) != EXIT_OK),
     }
     labels = None
+    where = ""
     if args.poses:
         desired = read_desired_poses(args.poses)
         frame = args.frame or "base"
         seeds = seeds_for(args, machine, desired)
         poses = poses_in_base(desired, frame, machine, seeds.rotations)
         comp = compensate(machine, poses, desired.pose_ids, seeds.starts)
+        before_commands = None
+        reg0 = nominal_registration(model, machine.result)
+        if frame == "tracker" and reg0 is not None:  # the nominal controller's own aim
+            aimed = poses_in_base(desired, frame, machine, seeds.rotations, reg0)
+            solved = solve_each(mech, aimed, seeds.starts)
+            before_commands = (solved.commands, solved.qpos)
+        comp, where = honest_before(machine, comp, model, before_commands)
         labels = seeds.labels
         inputs.update(
             poses=str(args.poses),
@@ -317,10 +376,12 @@ def run(args: argparse.Namespace) -> int:
         )
         where = "base frame" if frame == "base" else "tracker frame, identified registration"
         head = f"compensated {int(comp.reachable.sum())} of {len(desired)} poses ({where})"
-        lines = [seeds.sentence, _residual_line(comp, "the nominal commands")]
+        lines = [seeds.sentence, _residual_line(comp, "the nominal commands", where)]
     else:
         program = read_program(args.commands, mech.actuator_names, mech.actuator_is_slide)
-        comp = compensate_program(machine, program.commands, program.pose_ids)
+        reg0 = nominal_registration(model, machine.result)
+        comp = compensate_program(machine, program.commands, program.pose_ids, reg0)
+        comp, where = honest_before(machine, comp, model)
         changes = program_changes(machine, comp)
         inputs.update(
             commands=str(args.commands),
@@ -337,11 +398,12 @@ def run(args: argparse.Namespace) -> int:
             f"{a} {c['max']:.4g} {c['unit']} (pose_id {c['pose_id']})" for a, c in changes.items()
         )
         lines = [
-            _residual_line(comp, "the program's own commands"),
+            _residual_line(comp, "the program's own commands", where),
             f"largest change from the program: {moved}" if moved else None,
         ]
     out = Path(args.out)
     text = commands_csv(machine, comp, labels)
+    inputs["nominal_error_frame"] = where
     side = json_text(sidecar(machine, comp, inputs, program=not args.poses))
     write_files({out: text, out.with_suffix(".json"): side}, make_parents=True)  # both, or neither
     print(head)

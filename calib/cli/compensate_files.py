@@ -15,12 +15,14 @@ COLUMNS = {
     "the identified model predicts at the written commands",
     "predicted_residual_deg": "angle between the desired tool frame and the predicted one",
     "predicted_error_nominal_mm": "3D error the identified model predicts for the "
-    "nominal model's commands of the same pose (what compensation corrects)",
+    "nominal model's commands of the same pose (what compensation corrects), at the tool point",
+    "predicted_error_nominal_reflectors_mm": "the same at the reflectors (RMS over them): what "
+    "the tracker would measure; the tool point's is extrapolated from them",
 }
 PROGRAM_COLUMNS = {
     **COLUMNS,
     "predicted_error_nominal_mm": "3D error the identified model predicts for the "
-    "program's own commands (what compensation corrects)",
+    "program's own commands (what compensation corrects), at the tool point",
 }
 SEED_COLUMN = (
     "the program target (pose_id) whose configuration and orientation seeded the pose, or '--seed'"
@@ -29,6 +31,11 @@ SEED_COLUMN = (
 
 def _fmt(value: float) -> str:
     return "" if not np.isfinite(value) else repr(float(value))
+
+
+def _reflectors(comp: Compensation) -> np.ndarray:
+    refl = comp.nominal_reflector_error_m
+    return np.full(len(comp.pose_ids), np.nan) if refl is None else refl
 
 
 def commands_csv(
@@ -51,6 +58,7 @@ def commands_csv(
                 _fmt(comp.residual_m[i] * 1e3),
                 _fmt(np.degrees(comp.residual_rad[i])),
                 _fmt(comp.nominal_error_m[i] * 1e3),
+                _fmt(_reflectors(comp)[i] * 1e3),
                 *([seeds[i]] if seeds is not None else []),
             ]
         )

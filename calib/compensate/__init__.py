@@ -6,6 +6,7 @@ from common.face import face
 __all__, __getattr__, __dir__ = face(
     __name__,
     {
+        "before": ("nominal_commands_error",),
         "compensation": (
             "TwistCompensation",
             "reachable_compensated_commands",

@@ -143,25 +143,33 @@ def solve_each(mech: Mechanism, poses: np.ndarray, starts: np.ndarray | None = N
     return solve_frames(mech, rotations, positions, starts, poses=poses, skip=skip)
 
 
-def _tool_at(mech: Mechanism, joints: np.ndarray, start: np.ndarray):
+def tool_and_targets(
+    mech: Mechanism, joints: np.ndarray, start: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tool points (N, 3) and reflectors (N, T, 3) at the actuated joints' values ``joints``
+    (N, A), from the configurations ``start`` (N, nq); NaN where a row cannot be evaluated."""
+    return _tool_at(mech, joints, start, with_targets=True)[1:]
+
+
+def _tool_at(mech: Mechanism, joints: np.ndarray, start: np.ndarray, with_targets: bool = False):
     """Tool rotations (N, 3, 3) and positions (N, 3) at the actuated joints' values ``joints``
     (rows of NaN stay NaN; a gain may take a joint a few ppm past its stroke)."""
     rot = np.full((len(joints), 3, 3), np.nan)
     pos = np.full((len(joints), 3), np.nan)
-    ok = np.all(np.isfinite(joints), axis=1)
-    if not np.any(ok):
-        return rot, pos
-    try:
-        sol = forward_batch(mech, joints[ok], start=start[ok], check_stroke=False)
-        rot[ok], pos[ok] = sol.tool_rotation, sol.tool_position
-    except (ClosureError, WorkspaceError):  # one by one, leaving out those that fail
-        for i in np.flatnonzero(ok):
-            try:
-                one = forward(mech, joints[i], start=start[i], check_stroke=False)
-            except (ClosureError, WorkspaceError):
-                continue
-            rot[i], pos[i] = one.tool_rotation, one.tool_position
-    return rot, pos
+    targets = np.full((len(joints), len(mech.target_names), 3), np.nan)
+    ok = np.all(np.isfinite(joints), axis=1) & np.all(np.isfinite(start), axis=1)
+    if np.any(ok):
+        try:
+            sol = forward_batch(mech, joints[ok], start=start[ok], check_stroke=False)
+            rot[ok], pos[ok], targets[ok] = sol.tool_rotation, sol.tool_position, sol.targets
+        except (ClosureError, WorkspaceError):  # one by one, leaving out those that fail
+            for i in np.flatnonzero(ok):
+                try:
+                    one = forward(mech, joints[i], start=start[i], check_stroke=False)
+                except (ClosureError, WorkspaceError):
+                    continue
+                rot[i], pos[i], targets[i] = one.tool_rotation, one.tool_position, one.targets
+    return (rot, pos, targets) if with_targets else (rot, pos)
 
 
 @dataclass(frozen=True)
@@ -177,6 +185,9 @@ class Compensation:
     residual_rad: np.ndarray  # (N,) its tool orientation error there
     nominal_commands: np.ndarray  # (N, A) the nominal model's commands, NaN where it fails
     nominal_error_m: np.ndarray  # (N,) the identified model's error for the nominal commands
+    nominal_qpos: np.ndarray | None = None  # (N, nq) the nominal configurations (the branch)
+    # (N,) RMS over the reflectors of the nominal commands' error (calib.compensate.before)
+    nominal_reflector_error_m: np.ndarray | None = None
 
     @property
     def reachable(self) -> np.ndarray:
@@ -239,4 +250,5 @@ def compensate_frames(
         residual_rad=residual_rad,
         nominal_commands=nominal.commands,
         nominal_error_m=np.linalg.norm(nominal_pos - positions, axis=1),
+        nominal_qpos=nominal.qpos,
     )

@@ -21,6 +21,7 @@ import numpy as np
 
 from calib.compensate.identified_machine import IdentifiedMachine
 from calib.compensate.poses import Compensation, SolvedPoses, compensate_frames, stroke_excess
+from calib.fit.registration import Registration
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
@@ -68,17 +69,33 @@ def nominal_targets(mech: Mechanism, commands: np.ndarray) -> NominalTargets:
 
 
 def compensate_program(
-    machine: IdentifiedMachine, commands: np.ndarray, pose_ids: tuple[str, ...]
+    machine: IdentifiedMachine,
+    commands: np.ndarray,
+    pose_ids: tuple[str, ...],
+    nominal_registration: Registration | None = None,
 ) -> Compensation:
     """Corrected commands (N, A) for the program's ``commands`` (N, A) (SI): each puts the
     identified tool frame where the nominal model puts it at the program's commands, solved
-    from the program's configuration; the nominal commands are the program's own."""
+    from the program's configuration; the nominal commands are the program's own.
+
+    For a tracker-frame result "where the nominal model puts it" is seen by the tracker: the
+    nominal tool frame through ``nominal_registration`` (the nominal model's registration on
+    the calibration set, calib.fit.nominal_registration) into the tracker's frame, then
+    through the identified registration into the identified base frame. The identified base
+    frame alone is no reference: how a fit splits a rigid motion between its registration
+    and weakly determined parameters is arbitrary (a Stewart platform's identified base sat
+    50 mm from the nominal one and its program came out past the strokes)."""
     targets = nominal_targets(machine.nominal, commands)
+    rotations, positions = targets.rotations, targets.positions
+    if machine.registration is not None and nominal_registration is not None:
+        turn = machine.registration.rotation @ nominal_registration.rotation.T
+        positions = machine.registration.to_base(nominal_registration.to_tracker(positions))
+        rotations = turn @ rotations
     return compensate_frames(
         machine,
         pose_ids,
-        targets.rotations,
-        targets.positions,
+        rotations,
+        positions,
         targets.solved,
         skip=targets.problems,
     )

@@ -57,6 +57,7 @@ __all__, __getattr__, __dir__ = face(
             "CalibrationRun",
             "FitFailed",
             "calibrate",
+            "nominal_registration",
             "verify_result",
         ),
         "run_content": (

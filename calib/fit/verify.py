@@ -109,6 +109,17 @@ def _side(model: CalibrationModel, measured_base: np.ndarray, predicted: np.ndar
     return score_side(model.nominal, measured_base, predicted)
 
 
+def nominal_fit_registration(
+    model: CalibrationModel, commands: np.ndarray, measured: np.ndarray
+) -> Registration:
+    """The nominal model's registration of tracker-frame readings ``measured`` (P, T, 3) at
+    ``commands``: the rigid fit of the readings to the nominal predictions, the "before"'s
+    frame in every command (verify, compensate)."""
+    fresh = CalibrationModel(model.nominal, model.params)
+    predicted = fresh.predict(np.zeros(model.n_parameters), commands).targets
+    return initial_registration(measured, predicted)
+
+
 def verify(
     model: CalibrationModel,
     values: np.ndarray,
@@ -117,12 +128,14 @@ def verify(
     pose_ids: np.ndarray,
     registration_after: Registration | None = None,
     calibration_set: tuple[np.ndarray, np.ndarray] | None = None,
+    registration_before: Registration | None = None,
 ) -> Verification:
     """Before (nominal) and after (``values``) errors of readings ``measured`` (P, T, 3).
 
     With ``registration_after`` the readings are in the tracker's frame; the nominal
     registration is then fitted on ``calibration_set`` = (commands, readings) of the
-    calibration, or, without it, on these readings (said in ``note``)."""
+    calibration (or given as ``registration_before``: calib.fit.workflow.nominal_registration,
+    the one every command uses), or, without either, on these readings (said in ``note``)."""
     x0 = np.zeros(model.n_parameters)
     fresh = CalibrationModel(model.nominal, model.params)
     nominal = fresh.predict(x0, commands).targets
@@ -131,9 +144,10 @@ def verify(
         before_base = after_base = measured
         note = "readings in the machine's base frame"
     else:
-        if calibration_set is not None:
-            c_cmd, c_meas = calibration_set
-            reg0 = initial_registration(c_meas, fresh.predict(x0, c_cmd).targets)
+        if registration_before is not None or calibration_set is not None:
+            reg0 = registration_before
+            if reg0 is None:
+                reg0 = nominal_fit_registration(model, *calibration_set)
             note = (
                 "tracker frame: 'after' with the registration identified with the parameters, "
                 "'before' with one fitted to the nominal model on the calibration set"

@@ -47,7 +47,7 @@ from calib.fit.verdict import (
     noise_rule,
 )
 from calib.fit.verdict_notes import with_notes
-from calib.fit.verify import Verification, verify
+from calib.fit.verify import Verification, nominal_fit_registration, verify
 from twin.exceptions import TwinError
 
 
@@ -280,11 +280,11 @@ def verify_result(
             f"the data is in the '{obs.frame}' frame but the result was identified from "
             f"'{frame}'-frame readings: a registration cannot carry over"
         )
-    calibration = None
+    before = None
     if obs.frame == "tracker":
         if loaded.registration is None:
             raise ResultFileError(f"{loaded.path}: tracker-frame result without registration")
-        calibration = _calibration_set(model, loaded)
+        before = nominal_registration(model, loaded)
     try:
         v = verify(
             model,
@@ -293,11 +293,22 @@ def verify_result(
             obs.measured,
             picked.pose_ids,
             registration_after=loaded.registration,
-            calibration_set=calibration,
+            registration_before=before,
         )
     except TwinError as exc:  # e.g. no closure at the result's values: name the odd ones
         raise unusable_values(loaded, model.params, exc) from None
     return v, selection
+
+
+def nominal_registration(model: CalibrationModel, loaded: CalibrationResult):
+    """The nominal model's registration on the result's calibration set (the rows the result
+    names in the data file it names): the one frame every command's "before" uses (verify's
+    nominal side, compensate's nominal commands). None for a base-frame result, or when the
+    calibration set is not readable."""
+    if loaded.data.get("frame", "base") != "tracker":
+        return None
+    calibration = _calibration_set(model, loaded)
+    return None if calibration is None else nominal_fit_registration(model, *calibration)
 
 
 def _calibration_set(model: CalibrationModel, loaded: CalibrationResult):
