@@ -26,6 +26,7 @@ from calib.data.select import CALIBRATION, select_set
 from calib.estimators.levenberg_marquardt import LMOptions
 from calib.exceptions import CalibError, TooManyOutliersError
 from calib.fit.identification import IdentificationResult, identify
+from calib.fit.kinds.state import state_for
 from calib.fit.model import CalibrationModel
 from calib.fit.observations import Observations, bind_dataset
 from calib.fit.position_error import stats_mm
@@ -95,9 +96,11 @@ def calibrate(
     readings as well as plain least squares (calib.fit.regularisation); ``prior_spec``
     (``--prior-std``) instead puts a zero-mean prior of those widths, weighed against the
     data's own residual scale; ``regularise=False`` is plain least squares."""
+    dataset = state_for(model, dataset)
     picked, selection = select_set(dataset, set_name, "calibration")
     used = set_name if set_name is not None else (CALIBRATION if picked is not dataset else None)
     obs = bind_dataset(model.nominal, picked)
+    model.bind_state(obs.state)  # the offset kinds read the readings' state
     accuracy = declared_accuracy(sigma_mm, picked.tracker)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
     ranges = physical_ranges(model.params, prior_spec)
@@ -385,8 +388,9 @@ def verify_result(
     set_name: str | None,
 ) -> tuple[Verification, str]:
     """Score ``dataset`` (rows of ``set_name``, default all) before and after ``loaded``."""
-    picked, selection = select_set(dataset, set_name, "verification")
+    picked, selection = select_set(state_for(model, dataset), set_name, "verification")
     obs = bind_dataset(model.nominal, picked)
+    model.bind_state(obs.state)
     values = loaded.values_for(model.params)
     frame = loaded.data.get("frame", "base")
     if obs.frame != frame:
