@@ -5,7 +5,11 @@ mechanism with zero closure equations (every joint actuated, forward kinematics 
 parallel or hybrid one has closures that fix its passive joints. What it reads from the
 MJCF (and refuses to guess):
 * actuators: every ``<actuator>`` entry drives one slide or hinge joint; its name is the
-  actuator's name in datasets; the joint's value is the commanded value (metres/radians);
+  actuator's name in datasets; the joint's value is the commanded value (metres/radians)
+  divided by the actuator's ``gear`` (MuJoCo's default 1: the command itself). The command is
+  the set point of the actuator's length ``gear * qpos``, where a MuJoCo ``<position>`` servo
+  settles; a calibrated model holds an actuator's gain there (calib export). The strokes are
+  the joint's range in commands (``gear`` times it);
 * closures: every ``<equality>`` of type ``connect`` or ``weld`` between two *sites*
   (a body-based connect stores its anchor at compile time and would absorb injected errors);
 * targets: the sites named ``target_*`` (laser-tracker reflectors on the tool);
@@ -154,8 +158,16 @@ class Mechanism:
         self.actuator_qpos = m.jnt_qposadr[self.actuator_joints].copy()
         self.actuator_dofs = m.jnt_dofadr[self.actuator_joints].copy()
         self.actuator_is_slide = m.jnt_type[self.actuator_joints] == SLIDE
+        gear = m.actuator_gear[:, 0].copy()
+        if not np.all(np.isfinite(gear) & (gear != 0.0)):
+            i = int(np.flatnonzero(~(np.isfinite(gear) & (gear != 0.0)))[0])
+            raise ModelError(
+                f"actuator '{names[i]}' of '{self.name}' has gear {gear[i]!r}: a command must "
+                "set its joint (a finite gear other than 0)"
+            )
+        self.actuator_gear = gear
         limited = m.jnt_limited[self.actuator_joints].astype(bool)
-        rng = m.jnt_range[self.actuator_joints].copy()
+        rng = np.sort(m.jnt_range[self.actuator_joints] * gear[:, None], axis=1)
         rng[~limited] = [-np.inf, np.inf]
         self.actuator_range = rng
 
@@ -251,6 +263,26 @@ class Mechanism:
     def is_serial(self) -> bool:
         """No closures: forward kinematics is direct."""
         return self.n_closure == 0
+
+    @property
+    def is_geared(self) -> bool:
+        """Whether an actuator's joint value differs from its command (a gear other than 1)."""
+        return bool(np.any(self.actuator_gear != 1.0))
+
+    def joints_of_commands(self, commands: np.ndarray) -> np.ndarray:
+        """The actuated joints' values (..., A) of the commands (..., A): command / gear."""
+        c = np.asarray(commands, dtype=float)
+        return c / self.actuator_gear if self.is_geared else c
+
+    def commands_of_joints(self, joints: np.ndarray) -> np.ndarray:
+        """The commands (..., A) that hold the actuated joints at ``joints`` (..., A)."""
+        q = np.asarray(joints, dtype=float)
+        return q * self.actuator_gear if self.is_geared else q
+
+    @property
+    def home_commands(self) -> np.ndarray:
+        """The commands (A,) of the home configuration."""
+        return self.commands_of_joints(self.home_qpos[self.actuator_qpos])
 
     @property
     def n_actuators(self) -> int:

@@ -8,7 +8,8 @@
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
                              [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
     python -m calib compensate --model M.xml --errors E.toml --result R.json
-                             --poses desired.csv --out commands.csv [--frame base|tracker]
+                             (--commands program.csv | --poses desired.csv [--seed ...])
+                             --out commands.csv [--frame base|tracker] [--force]
     python -m calib export   --model M.xml --errors E.toml --result R.json
                              --out M_calibrated.xml [--dh-out T.csv]
 
@@ -20,8 +21,9 @@ where that predicts held-out poses no worse (``--plain``: never). ``--with D.jso
 effect a diagnosis named to the error model. ``verify`` scores any set before (nominal) and
 after (identified): the 3D position error per reading (RMS, mean, max), a per-reading CSV and
 a PNG. ``diagnose`` asks whether the residual is more than the tracker noise and which
-physical effect explains it, judged on held-out poses. ``compensate`` turns desired tool
-poses into the commands that put the identified machine there; ``export`` writes the
+physical effect explains it, judged on held-out poses. ``compensate`` turns a robot's
+program (joint targets) or desired tool poses into the commands that put the identified
+machine's tool where they mean; ``export`` writes the
 calibrated model (MJCF; DH table for a DH-generated arm); ``verify`` without ``--result``
 scores a model as it is.
 
@@ -29,7 +31,8 @@ Exit codes (calib.fit.verdict): 0 success (a residual above the tracker noise is
 refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
 do not fit the model (a likely data error named, too many outliers, implausible estimates
 the data determine well, an implausible residual, or a residual above an explicit
-``--max-ratio``); verify of a result identify refused exits with identify's code; 5 some
+``--max-ratio``); verify, compensate and export of a result identify refused exit with
+identify's code (compensate and export write nothing unless ``--force``); 5 some
 desired poses out of reach (compensate); 130 interrupted.
 """
 
@@ -45,6 +48,7 @@ from pathlib import Path
 import calib.cli.compensate as cmd_compensate
 import calib.cli.export as cmd_export
 from calib.cli.common import (
+    identify_exit_code,
     positive_int,
     print_verdict,
     prior_spec,
@@ -152,13 +156,6 @@ def _csv_text(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def _refused(loaded) -> int:
-    """The exit code identify gave the result (0 if it was accepted or does not say)."""
-    verdict = loaded.data.get("verdict") or {}
-    code = verdict.get("exit_code", EXIT_OK)
-    return code if isinstance(code, int) and not isinstance(code, bool) else EXIT_OK
-
-
 def cmd_verify(args: argparse.Namespace) -> int:
     if args.result is None:  # the model as it is, e.g. one written by export
         import calib.cli.verify_as_is as verify_as_is
@@ -170,7 +167,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     loaded = load_result(args.result, expected_model=model.nominal.name)
     model = model_for_result(model, loaded.data)
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
-    refused = _refused(loaded)
+    refused = identify_exit_code(loaded)
     if refused != EXIT_OK:
         message = (loaded.data.get("verdict") or {}).get("message", "")
         print(
@@ -348,6 +345,7 @@ def check_out(args: argparse.Namespace) -> None:
         "result": "the result file",
         "test": "the test dataset",
         "poses": "the desired poses",
+        "commands": "the program",
     }
     inputs = {getattr(args, k, None): role for k, role in roles.items()}
     for path in [p for p in inputs if p and str(p).endswith(".csv")]:

@@ -6,9 +6,10 @@ import argparse
 import math
 import sys
 
-from calib.data import read_dataset
+from calib.data import CalibrationResult, read_dataset
 from calib.fit import (
     EXIT_BAD_INPUT,
+    EXIT_OK,
     EXIT_POOR_FIT,
     MAX_SIGMA_MM,
     CalibrationRun,
@@ -109,3 +110,44 @@ def result_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, help="nominal MJCF of the machine")
     p.add_argument("--errors", required=True, help="error model (TOML [[parameter]] list)")
     p.add_argument("--result", required=True, help="result JSON written by identify --out")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="use a result that identify refused (exit 3 or 4) anyway, and say so",
+    )
+
+
+def identify_exit_code(result: CalibrationResult) -> int:
+    """The exit code identify gave ``result`` (0 if it was accepted or does not say)."""
+    code = (result.data.get("verdict") or {}).get("exit_code", EXIT_OK)
+    return code if isinstance(code, int) and not isinstance(code, bool) else EXIT_OK
+
+
+def refused_result(result: CalibrationResult, force: bool, command: str) -> int:
+    """identify's exit code for a result it refused, said with its reason on stderr, for
+    ``command`` to return before writing anything; 0 for an accepted result, or with
+    ``force`` (then the refusal is said and the command proceeds)."""
+    code = identify_exit_code(result)
+    if code == EXIT_OK:
+        return EXIT_OK
+    verdict = result.data.get("verdict") or {}
+    message = str(verdict.get("message", "")).strip() or "(no reason recorded)"
+    if force:
+        print(
+            f"--force: {command} of {result.path}, a result identify refused (exit {code}): "
+            f"{message}",
+            file=sys.stderr,
+        )
+        return EXIT_OK
+    print(
+        f"REFUSED RESULT: identify refused {result.path} (exit {code}): {message}",
+        file=sys.stderr,
+    )
+    for hint in verdict.get("hints") or []:
+        print(f"  likely cause: {hint}", file=sys.stderr)
+    print(
+        f"{command}: nothing written; fix the fit (identify's message above), or --force to "
+        f"{command} this result anyway",
+        file=sys.stderr,
+    )
+    return code

@@ -7,6 +7,10 @@ tracker's frame are registered by a rigid fit of the model's predictions to the 
 the calibration set (the rows marked 'calibration'), so that the scored rows do not choose
 their own frame; a file without such rows (or scoring the calibration rows themselves) is
 registered on the scored rows, and the note says that this favours the model.
+
+A model written by ``calib export`` has a sidecar (calib.compensate.sidecar) listing the
+identified parameters its file cannot hold; when it lists any, the first line printed says
+so: the model as it is predicts without them.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.compensate import missing_line
 from calib.data import CALIBRATION, Dataset, read_dataset, select_set
 from calib.fit import EXIT_OK, Registration, Side, bind_dataset, initial_registration, score_side
 from common.atomic_files import json_text
@@ -95,6 +100,9 @@ def _csv_text(rows: list[dict]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    lacks = missing_line(args.model)
+    if lacks:
+        print(lacks)
     mech = Mechanism.from_xml(args.model)
     dataset = read_dataset(args.data, expected_model=mech.name)
     scored, selection = score_as_is(mech, dataset, args.set)
@@ -104,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         out = Path(args.out)
         content = {"model": str(args.model), "data": str(args.data), "set": args.set}
+        if lacks:
+            content["model_lacks"] = lacks
         body = json_text({**content, **scored.as_dict(), "selection": selection})
         csv_text = _csv_text(scored.rows())
         write_files({out: body, out.with_suffix(".csv"): csv_text}, make_parents=True)

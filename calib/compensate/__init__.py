@@ -20,10 +20,20 @@ __all__, __getattr__, __dir__ = face(
             "gains_text",
             "kinematics_difference",
         ),
+        "sidecar": (
+            "missing_line",
+            "sidecar_path",
+        ),
         "poses": (
             "Compensation",
             "compensate",
             "solve_each",
+        ),
+        "program": (
+            "NominalTargets",
+            "compensate_program",
+            "nearest_targets",
+            "nominal_targets",
         ),
     },
 )

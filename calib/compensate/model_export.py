@@ -6,10 +6,12 @@ spread over what the machine reaches: the file is written only if they agree to
 ``FK_TOLERANCE_M``. For a model generated from a DH table, the calibrated table as well
 (twin.formats.dh_extract). Nothing is written when any part fails.
 
-Actuator gains (``identify --with`` a diagnosis that named them) are no geometry: an MJCF
-joint's value is its command. The file then holds the identified geometry, its kinematics
-is checked in joint values, and the gains are named in its header and the command's
-output for the controller to apply (joint = zero + (command - zero)(1 + gain)).
+Actuator gains (``identify --with`` a diagnosis that named them) go into the actuators' gears
+and their joints' zeros (twin.formats.mjcf_values): a command c sets the joint to
+zero + (c - zero)(1 + gain), as in the identified model, and the check compares the two at
+the same commands. What the MJCF cannot hold (joint compliances, any kind without an MJCF
+attribute) is written beside it (calib.compensate.sidecar), and the check then compares
+the written model with the identified one without those parameters.
 """
 
 from __future__ import annotations
@@ -22,11 +24,18 @@ from pathlib import Path
 import numpy as np
 
 from calib.compensate.identified_machine import IdentifiedMachine
+from calib.compensate.sidecar import not_held, sidecar_path, sidecar_text
+from calib.compensate.urdf_export import UrdfExport, calibrated_urdf, source_urdf
 from calib.exceptions import CalibError
 from common.write_set import write_files
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.formats.dh_extract import dh_table_of, format_dh_table
-from twin.formats.mjcf_values import WrittenMjcf, mjcf_with_values, with_header
+from twin.formats.mjcf_values import (
+    WRITABLE_KINDS,
+    WrittenMjcf,
+    mjcf_with_values,
+    with_header,
+)
 from twin.kinematics.batch import forward_batch
 from twin.kinematics.single_pose import forward
 from twin.mechanism import Mechanism
@@ -88,10 +97,14 @@ def probe_commands(mech: Mechanism, n: int = N_PROBES, seed: int = PROBE_SEED) -
     return np.array(out)
 
 
-def kinematics_difference(a: Mechanism, b: Mechanism, commands: np.ndarray) -> KinematicsCheck:
+def kinematics_difference(
+    a: Mechanism, b: Mechanism, commands: np.ndarray, a_commands: np.ndarray | None = None
+) -> KinematicsCheck:
     """The largest differences of targets, tool point and tool frame between ``a`` and
-    ``b`` at ``commands`` (N, A) (SI)."""
-    fa, fb = forward_batch(a, commands), forward_batch(b, commands)
+    ``b`` at ``commands`` (N, A) (SI); ``a_commands``: ``a``'s inputs for them, if others
+    (the joint values the commands give in an identified model with gains)."""
+    a_in = commands if a_commands is None else a_commands
+    fa, fb = forward_batch(a, a_in, check_stroke=a_commands is None), forward_batch(b, commands)
     points = np.concatenate(
         [fa.targets - fb.targets, (fa.tool_position - fb.tool_position)[:, None]], 1
     )
@@ -112,6 +125,25 @@ def geometry(machine: IdentifiedMachine) -> tuple[ParameterSet, np.ndarray]:
     return ParameterSet(chosen, machine.nominal.model), values[keep]
 
 
+def gain_scales(machine: IdentifiedMachine) -> dict[str, float]:
+    """1 + gain per gained actuator's name (empty without gains)."""
+    gains = machine.model.gains
+    if gains is None:
+        return {}
+    g, scale = gains.gains(machine.values), gains.scale(machine.values)
+    names = machine.nominal.actuator_names
+    return {names[a]: float(scale[a]) for a in np.flatnonzero(g != 0.0)}
+
+
+def gained_joints(machine: IdentifiedMachine, commands: np.ndarray) -> np.ndarray:
+    """The joint values (N, A) the commands give through the identified gains alone (what
+    the exported model holds; its compliances are not)."""
+    gains = machine.model.gains
+    if gains is None:
+        return np.asarray(commands, dtype=float)
+    return gains.joints(machine.values, commands, machine.model.joint_zeros(machine.values))
+
+
 def gains_text(machine: IdentifiedMachine) -> str | None:
     """The identified actuator gains (ppm) and joint compliances in words, or None without
     any."""
@@ -126,8 +158,9 @@ def gains_text(machine: IdentifiedMachine) -> str | None:
             for k in np.flatnonzero(params.is_gain)
         ]
         texts.append(
-            "actuator gains, no geometry and so not in the MJCF (the controller applies them: "
-            "joint = zero + (command - zero)(1 + gain)): " + ", ".join(parts)
+            "actuator gains, in the actuators' gear (1 / (1 + gain)) and their joints' zero "
+            "(ref), so that a command sets the joint to zero + (command - zero)(1 + gain): "
+            + ", ".join(parts)
         )
     if params.has_compliance:
         parts = [
@@ -140,8 +173,8 @@ def gains_text(machine: IdentifiedMachine) -> str | None:
             for k in np.flatnonzero(params.is_compliance)
         ]
         texts.append(
-            "joint compliances, no geometry and so not in the MJCF (the joints yield to their "
-            "gravity load: joint = command - compliance x load): " + ", ".join(parts)
+            "joint compliances, which an MJCF cannot hold (the joints yield to their gravity "
+            "load: joint = command - compliance x load), in the sidecar: " + ", ".join(parts)
         )
     return "; the ".join(texts)
 
@@ -158,6 +191,7 @@ def calibrated_mjcf(
         values,
         out_dir=out_dir,
         bound_masses=machine.nominal.masses_defaulted,
+        scales=gain_scales(machine),
     )
 
 
@@ -167,16 +201,27 @@ class Export:
     dh_out: Path | None
     written: WrittenMjcf
     check: KinematicsCheck
+    sidecar: Path
+    not_held: list[dict]  # the parameters the model cannot hold (in the sidecar)
+    urdf_out: Path | None = None
+    urdf: UrdfExport | None = None
 
 
-def _header(machine: IdentifiedMachine, model_path: Path, w: WrittenMjcf, c: KinematicsCheck):
+def _header(
+    machine: IdentifiedMachine,
+    model_path: Path,
+    w: WrittenMjcf,
+    c: KinematicsCheck,
+    missing: list[dict],
+    side: Path,
+) -> str:
     return (
         f"Calibrated model of '{machine.nominal.name}': {model_path.name} with the errors "
         f"identified in {machine.result.path.name} written into its geometry by python -m "
         f"calib export ({len(w.bodies)} bodies placed anew, {len(w.sites)} sites moved, "
-        f"{len(w.joints)} joint zeros shifted as 'ref'). Its forward kinematics differs from "
-        f"the identified model's by at most {c.max_position_m * 1e3:.3g} mm over "
-        f"{c.n_commands} commands."
+        f"{len(w.joints)} joint zeros shifted as 'ref', {len(w.actuators)} actuator gains as "
+        f"'gear'). Its forward kinematics differs from the identified model's by at most "
+        f"{c.max_position_m * 1e3:.3g} mm over {c.n_commands} commands."
         + (
             " The masses are MuJoCo's bounded defaults (kinematics only)."
             if machine.nominal.masses_defaulted
@@ -188,6 +233,12 @@ def _header(machine: IdentifiedMachine, model_path: Path, w: WrittenMjcf, c: Kin
             else ""
         )
         + (f" The {gains_text(machine)}." if not machine.model.params.is_geometry else "")
+        + (
+            f" It lacks {len(missing)} identified parameter(s) an MJCF cannot hold, listed "
+            f"in {side.name}: the check above is without them."
+            if missing
+            else ""
+        )
     )
 
 
@@ -203,6 +254,14 @@ def calibrated_dh_text(machine: IdentifiedMachine, model_path: Path) -> str:
             "the identified encoder offsets",
             f"generate its model: python -m twin.formats.dh_table THIS.csv --name "
             f"{machine.nominal.name} --out-dir DIR",
+            *(
+                [
+                    f"not in this table: the {gains_text(machine)}; the calibrated MJCF "
+                    "holds the gains"
+                ]
+                if machine.model.params.has_gains
+                else []
+            ),
         ),
     )
 
@@ -213,16 +272,21 @@ def export_model(
     out: str | os.PathLike[str],
     dh_out: str | os.PathLike[str] | None = None,
     commands: np.ndarray | None = None,
+    urdf_out: str | os.PathLike[str] | None = None,
+    urdf: str | os.PathLike[str] | None = None,
 ) -> Export:
-    """Write the calibrated MJCF to ``out`` (and the calibrated DH table to ``dh_out``)
-    after checking the written model's kinematics against the identified one at
-    ``commands`` (default: :func:`probe_commands`); nothing is written if a part fails."""
+    """Write the calibrated MJCF to ``out`` and its sidecar (and the calibrated DH table to
+    ``dh_out``, the calibrated URDF of the model's URDF ``urdf`` (default: the one its header
+    names) to ``urdf_out`` with its sidecar) after checking the written models' kinematics
+    against the identified one at ``commands`` (default: :func:`probe_commands`); nothing is
+    written if a part fails."""
     model_path, out = Path(model_path), Path(out)
     if out.resolve() == model_path.resolve():
         raise ExportError(f"--out {out} is the nominal model itself: choose another file")
     dh_text = None if dh_out is None else calibrated_dh_text(machine, model_path)
     written = calibrated_mjcf(machine, model_path, out.parent)
     probes = probe_commands(machine.nominal) if commands is None else np.asarray(commands)
+    missing = not_held(machine, (*WRITABLE_KINDS, "actuator_gain"))
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".xml")
     os.close(fd)
@@ -232,16 +296,34 @@ def export_model(
         exported = Mechanism.from_xml(tmp)
     finally:
         tmp.unlink(missing_ok=True)
-    check = kinematics_difference(machine.mechanism, exported, probes)
+    check = kinematics_difference(
+        machine.mechanism, exported, probes, gained_joints(machine, probes)
+    )
     if not check.max_position_m <= FK_TOLERANCE_M:
         raise ExportError(
             f"the written model's forward kinematics differs from the identified model's "
             f"by {check.max_position_m * 1e3:.3g} mm (more than "
             f"{FK_TOLERANCE_M * 1e3:g} mm): nothing written"
         )
-    header = _header(machine, model_path, written, check)
-    files = {out: with_header(written.text, header)}
+    side = sidecar_path(out)
+    header = _header(machine, model_path, written, check, missing, side)
+    held = {"geometry": len(geometry(machine)[0]), "actuator_gains": list(written.actuators)}
+    files = {
+        out: with_header(written.text, header),
+        side: sidecar_text(machine, out, model_path, missing, held),
+    }
     if dh_text is not None:
         files[Path(dh_out)] = dh_text
-    write_files(files)  # the model and its DH table together, or neither
-    return Export(out, None if dh_out is None else Path(dh_out), written, check)
+    done_urdf = None
+    if urdf_out is not None:
+        urdf_out = Path(urdf_out)
+        if sidecar_path(urdf_out) == side:
+            raise ExportError(f"--urdf-out {urdf_out} and --out {out} would share one sidecar")
+        urdf_out.parent.mkdir(parents=True, exist_ok=True)
+        source = source_urdf(model_path, urdf)
+        done_urdf = calibrated_urdf(machine, source, urdf_out, probes, FK_TOLERANCE_M)
+        files[urdf_out] = done_urdf.text
+        files[done_urdf.sidecar] = done_urdf.sidecar_text
+    write_files(files)  # the models, their sidecars and the DH table together, or none
+    dh = None if dh_out is None else Path(dh_out)
+    return Export(out, dh, written, check, side, missing, urdf_out, done_urdf)

@@ -23,7 +23,7 @@ import numpy as np
 from calib.compensate.identified_machine import IdentifiedMachine
 from twin.exceptions import ClosureError, WorkspaceError
 from twin.kinematics.batch import forward_batch
-from twin.kinematics.single_pose import forward, inverse, pose_to_frame
+from twin.kinematics.single_pose import forward, newton_solve, pose_to_frame
 from twin.mechanism import Mechanism
 from twin.rotations import rotation_angle
 from twin.workspace import check_pose_in_box
@@ -89,32 +89,58 @@ class SolvedPoses:
         return np.array([p is None for p in self.problems], dtype=bool)
 
 
-def solve_each(mech: Mechanism, poses: np.ndarray, starts: np.ndarray | None = None) -> SolvedPoses:
-    """Commands for each pose (N, 6) (SI) on ``mech``, each solved on its own from
-    ``starts[i]`` (a configuration; a row of NaN or None: from home)."""
-    poses = np.atleast_2d(np.asarray(poses, dtype=float))
-    commands = np.full((len(poses), mech.n_actuators), np.nan)
-    qpos = np.full((len(poses), mech.model.nq), np.nan)
+def solve_frames(
+    mech: Mechanism,
+    rotations: np.ndarray,
+    positions: np.ndarray,
+    starts: np.ndarray | None = None,
+    poses: np.ndarray | None = None,
+    skip: tuple[str | None, ...] | None = None,
+) -> SolvedPoses:
+    """Commands for each tool frame (rotation (N, 3, 3), position (N, 3), SI) on ``mech``,
+    each solved on its own from ``starts[i]`` (a configuration; a row of NaN or None: from
+    home). ``poses`` (N, 6): the same frames as [x y z rx ry rz], checked against the
+    workspace box the model declares (if any); ``skip``: a reason per frame not to solve it
+    (None: solve), which becomes its problem."""
+    commands = np.full((len(positions), mech.n_actuators), np.nan)
+    qpos = np.full((len(positions), mech.model.nq), np.nan)
     problems: list[str | None] = []
-    boxed = mech.workspace_min is not None and mech.workspace_max is not None
-    for i, pose in enumerate(poses):
+    boxed = poses is not None and mech.workspace_min is not None and mech.workspace_max is not None
+    for i in range(len(positions)):
+        if skip is not None and skip[i] is not None:
+            problems.append(skip[i])
+            continue
         start = None if starts is None or not np.all(np.isfinite(starts[i])) else starts[i]
+        q0 = np.array(mech.home_qpos if start is None else start, dtype=float)
+        goal = (rotations[i], positions[i])
         try:
             if boxed:
-                check_pose_in_box(mech, pose)
-            sol = inverse(mech, pose, start=start, check_stroke=False)
+                check_pose_in_box(mech, poses[i])
+            q, _, _ = newton_solve(mech, q0, np.arange(mech.model.nv), goal, "inverse kinematics")
         except WorkspaceError as exc:
             problems.append(str(exc))
             continue
         except ClosureError:
             problems.append(UNREACHABLE)
             continue
-        q = within_turns(mech, sol.qpos)
+        q = within_turns(mech, q)
         problem = stroke_excess(mech, q[mech.actuator_qpos])
         problems.append(problem)
         if problem is None:
             commands[i], qpos[i] = q[mech.actuator_qpos], q
     return SolvedPoses(commands, qpos, tuple(problems))
+
+
+def solve_each(mech: Mechanism, poses: np.ndarray, starts: np.ndarray | None = None) -> SolvedPoses:
+    """Commands for each pose (N, 6) (SI) on ``mech``, each solved on its own from
+    ``starts[i]`` (a configuration; a row of NaN or None: from home)."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    skip = tuple(
+        None if np.all(np.isfinite(p)) else f"a pose is 6 finite numbers [x y z rx ry rz], got {p}"
+        for p in poses
+    )
+    rotations, positions = pose_to_frame(poses)
+    return solve_frames(mech, rotations, positions, starts, poses=poses, skip=skip)
 
 
 def _tool_at(mech: Mechanism, joints: np.ndarray, start: np.ndarray):
@@ -140,10 +166,11 @@ def _tool_at(mech: Mechanism, joints: np.ndarray, start: np.ndarray):
 
 @dataclass(frozen=True)
 class Compensation:
-    """Commands for desired poses (base frame) on the identified machine."""
+    """Commands for desired tool frames (base frame) on the identified machine."""
 
     pose_ids: tuple[str, ...]
-    poses: np.ndarray  # (N, 6) desired, base frame, SI
+    rotations: np.ndarray  # (N, 3, 3) desired tool orientations, base frame
+    positions: np.ndarray  # (N, 3) desired tool points, base frame, SI
     commands: np.ndarray  # (N, A) SI, NaN where not reachable
     problems: tuple[str | None, ...]
     residual_m: np.ndarray  # (N,) tool position the identified model predicts at the commands
@@ -157,13 +184,35 @@ class Compensation:
 
 
 def compensate(
-    machine: IdentifiedMachine, poses: np.ndarray, pose_ids: tuple[str, ...]
+    machine: IdentifiedMachine,
+    poses: np.ndarray,
+    pose_ids: tuple[str, ...],
+    starts: np.ndarray | None = None,
 ) -> Compensation:
     """Commands that put the identified machine's tool at ``poses`` (N, 6) (base frame,
-    SI), each started from the nominal model's solution of the same pose."""
+    SI), each started from the nominal model's solution of the same pose (itself started
+    from ``starts[i]``, a configuration of the nominal model: a seed's branch; else home)."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
-    nominal = solve_each(machine.nominal, poses)
-    solved = solve_each(machine.mechanism, poses, starts=nominal.qpos)  # joint values
+    nominal = solve_each(machine.nominal, poses, starts)
+    return compensate_frames(machine, pose_ids, *pose_to_frame(poses), nominal, poses)
+
+
+def compensate_frames(
+    machine: IdentifiedMachine,
+    pose_ids: tuple[str, ...],
+    rotations: np.ndarray,
+    positions: np.ndarray,
+    nominal: SolvedPoses,
+    poses: np.ndarray | None = None,
+    skip: tuple[str | None, ...] | None = None,
+) -> Compensation:
+    """Commands that put the identified machine's tool frame at ``rotations`` (N, 3, 3),
+    ``positions`` (N, 3) (base frame, SI), each solved from ``nominal.qpos[i]`` (the nominal
+    model's configuration for the same frame: the same branch) and turned into commands
+    through the identified gains and compliances; ``nominal.commands``: the commands the
+    error of which is predicted (what compensation corrects). ``poses``: the frames as
+    [x y z rx ry rz] for the workspace box; ``skip``: a reason per frame not to solve it."""
+    solved = solve_frames(machine.mechanism, rotations, positions, nominal.qpos, poses, skip)
     commands = machine.commands_for_joints(solved.commands, solved.qpos)
     problems = list(solved.problems)
     for i in np.flatnonzero(solved.reachable):  # a gain may take a command past its stroke
@@ -174,20 +223,20 @@ def compensate(
             )
             commands[i] = np.nan
     reachable = np.array([p is None for p in problems], dtype=bool)
-    goal_rot, goal_pos = pose_to_frame(poses)
     # what the identified machine does with the written commands (the gains' round trip)
     rot, pos = _tool_at(machine.mechanism, machine.joints_for_commands(commands), solved.qpos)
-    turn = rotation_angle(np.swapaxes(goal_rot, -1, -2) @ np.nan_to_num(rot))
+    turn = rotation_angle(np.swapaxes(rotations, -1, -2) @ np.nan_to_num(rot))
     residual_rad = np.where(reachable, turn, np.nan)
     nominal_joints = machine.joints_for_commands(nominal.commands)
     _, nominal_pos = _tool_at(machine.mechanism, nominal_joints, nominal.qpos)
     return Compensation(
         pose_ids=tuple(pose_ids),
-        poses=poses,
+        rotations=rotations,
+        positions=positions,
         commands=commands,
         problems=tuple(problems),
-        residual_m=np.linalg.norm(pos - goal_pos, axis=1),
+        residual_m=np.linalg.norm(pos - positions, axis=1),
         residual_rad=residual_rad,
         nominal_commands=nominal.commands,
-        nominal_error_m=np.linalg.norm(nominal_pos - goal_pos, axis=1),
+        nominal_error_m=np.linalg.norm(nominal_pos - positions, axis=1),
     )

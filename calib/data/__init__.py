@@ -1,5 +1,5 @@
 """Data in and out of the calibration: the Dataset (a user's readings: CSV + sidecar) and its
-I/O, set selection, hints at wrong units or columns, result files, desired poses."""
+I/O, set selection, hints at wrong units or columns, result files, desired poses, programs."""
 
 from common.face import face
 
@@ -23,6 +23,12 @@ __all__, __getattr__, __dir__ = face(
         "hints": (
             "UNIT_SCALES",
             "likely_causes",
+        ),
+        "program": (
+            "Program",
+            "ProgramError",
+            "parse_seed",
+            "read_program",
         ),
         "result_file": (
             "CalibrationResult",

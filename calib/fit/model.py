@@ -21,6 +21,7 @@ from calib.diagnosis.gravity import GravityLoads, gravity_loads
 from calib.fit.actuator_gains import ColumnPlan, GainMap
 from calib.fit.joint_compliance import ComplianceMap, Settled, settle
 from calib.fit.kinds import OffsetMap, PoseState
+from twin.exceptions import ModelError
 from twin.kinematics.batch import forward_batch
 from twin.kinematics.sensitivity_batch import (
     JacobianPlan,
@@ -43,6 +44,18 @@ class CalibrationModel:
     """Nominal mechanism + error model; every evaluation injects values into a fresh copy."""
 
     def __init__(self, nominal: Mechanism, params: ParameterSet) -> None:
+        if nominal.is_geared:
+            geared = [
+                f"{n} (gear {g!r})"
+                for n, g in zip(nominal.actuator_names, nominal.actuator_gear, strict=True)
+                if g != 1.0
+            ]
+            raise ModelError(
+                f"model '{nominal.name}' has actuators whose joint is not their command: "
+                f"{', '.join(geared[:3])}: a calibrated model with its gains (calib export). "
+                "Calibrate the nominal model (with the result's gains: identify --with), or "
+                "score this one as it is (verify --model without --result)"
+            )
         self.nominal = nominal
         self.params = params
         self._cache_key: bytes | None = None

@@ -7,7 +7,13 @@
   ``xyaxes`` or ``zaxis`` it had is replaced by the equivalent ``quat``);
 * ``site_pos``: the site's ``pos``;
 * ``joint_zero``: the joint's ``ref`` (MuJoCo's ``qpos0``, the joint's zero), in the file's
-  angle unit for a hinge.
+  angle unit for a hinge;
+* an actuator's gain ``g`` (``scales``: 1 + g per actuator name): the actuator's ``gear``
+  1 / (1 + g), its joint's ``ref`` q0 (1 + g) (q0 the joint's zero), its joint's ``range`` and
+  every keyframe's ``qpos`` of the joint times 1 + g. A command c then sets the joint to
+  qpos = c / gear = c (1 + g) (a MuJoCo ``<position>`` servo settles where gear * qpos = c;
+  twin.mechanism reads every command so), whose travel from the zero, qpos - ref, is
+  (c - q0)(1 + g): the joint value q0 + (c - q0)(1 + g) the gain gives.
 
 The file is patched, not regenerated: every other byte (comments, defaults, classes, the
 order of attributes) stays as the user wrote it, and only elements whose geometry changes
@@ -40,6 +46,7 @@ from twin.parameters import HINGE, ParameterSet
 from twin.rotations import matrix_from_quat, quat_multiply
 
 WRITABLE_KINDS = ("body_pos", "body_rot", "site_pos", "joint_zero")
+ACTUATOR_TAGS = ("general", "motor", "position", "velocity", "intvelocity", "damper", "cylinder")
 ALT_ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
 # attributes holding a path relative to the model file's folder (see _relocated)
 _DIR_ATTRS = ("meshdir", "texturedir", "assetdir")
@@ -265,6 +272,58 @@ class WrittenMjcf:
     bodies: tuple[str, ...]
     sites: tuple[str, ...]
     joints: tuple[str, ...]
+    actuators: tuple[str, ...] = ()  # whose gear holds a gain
+
+
+def _file_units(model: mujoco.MjModel, j: int, spec: mujoco.MjSpec, value):
+    """Joint ``j``'s ref or range (SI) in the file's units (degrees for a hinge in a file
+    whose compiler says so)."""
+    if int(model.jnt_type[j]) == HINGE and spec.compiler.degree:
+        return np.degrees(value)
+    return value
+
+
+def _gain_edits(
+    tags: list[_Tag],
+    nominal: mujoco.MjModel,
+    injected: mujoco.MjModel,
+    spec: mujoco.MjSpec,
+    scales: dict[str, float],
+    where: str,
+) -> tuple[list[tuple[_Tag, _Edit]], dict[int, float]]:
+    """The actuators' gears, the joints' ranges and the keyframes' qpos of gained actuators,
+    and the ref (SI) of each gained joint by joint id (see the module's docstring)."""
+    edits: list[tuple[_Tag, _Edit]] = []
+    refs: dict[int, float] = {}
+    factors: dict[int, float] = {}  # qpos address of a gained joint -> qpos per command
+    for name, scale in scales.items():
+        if not (np.isfinite(scale) and scale > 0):
+            raise MjcfWriteError(f"actuator '{name}': 1 + gain = {scale!r} is not positive")
+        a = mujoco.mj_name2id(nominal, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+        found = [t for t in tags if t.tag in ACTUATOR_TAGS and t.attrs.get("name") == name]
+        if a < 0 or not found:
+            raise MjcfWriteError(f"{where}: no actuator named '{name}' in the file's text")
+        if float(nominal.actuator_gear[a, 0]) != 1.0:
+            raise MjcfWriteError(f"actuator '{name}' already has a gear: it holds no gain")
+        j = int(nominal.actuator_trnid[a, 0])
+        gear = 1.0 / scale
+        edits.append((found[0], _Edit({"gear": exact(gear)})))
+        adr = int(nominal.jnt_qposadr[j])
+        refs[j] = float(injected.qpos0[adr]) * scale
+        factors[adr] = 1.0 / gear  # the qpos of a command: command / gear
+        if nominal.jnt_limited[j]:
+            joint_name = mujoco.mj_id2name(nominal, mujoco.mjtObj.mjOBJ_JOINT, j)
+            rng = _file_units(nominal, j, spec, nominal.jnt_range[j] * factors[adr])
+            edits.append((_find(tags, "joint", joint_name, where), _Edit({"range": exact(rng)})))
+    for t in tags:
+        if t.tag == "key" and "qpos" in t.attrs:
+            qpos = np.array(t.attrs["qpos"].split(), dtype=float)
+            if len(qpos) != nominal.nq:
+                continue  # MuJoCo refuses it; not ours to mend
+            for adr, factor in factors.items():
+                qpos[adr] *= factor
+            edits.append((t, _Edit({"qpos": exact(qpos)})))
+    return edits, refs
 
 
 def mjcf_with_values(
@@ -275,6 +334,7 @@ def mjcf_with_values(
     out_dir: str | os.PathLike[str] | None = None,
     header: str | None = None,
     bound_masses: bool = False,
+    scales: dict[str, float] | None = None,
 ) -> WrittenMjcf:
     """The text of the MJCF file ``path`` with ``values`` (SI) of ``params`` written in.
 
@@ -282,7 +342,8 @@ def mjcf_with_values(
     ``out_dir``: where the text will be written; relative asset paths are rewritten to
     point at the same files from there. ``header``: a comment put before <mujoco>.
     ``bound_masses``: add MuJoCo's bounded default masses to <compiler> (for a file whose
-    bodies declare no mass, so that MuJoCo alone compiles it)."""
+    bodies declare no mass, so that MuJoCo alone compiles it). ``scales``: 1 + gain per
+    actuator name (the gains as gears, see the module's docstring)."""
     path = Path(path)
     data = path.read_bytes()
     injected = params.inject(nominal, np.asarray(values, dtype=float))
@@ -293,6 +354,11 @@ def mjcf_with_values(
     tags = _start_tags(data, str(path))
     edits: list[tuple[_Tag, _Edit]] = []
     changed = _changed_elements(params, nominal, injected)
+    refs: dict[int, float] = {}
+    if scales:
+        gain_edits, refs = _gain_edits(tags, nominal, injected, spec, scales, str(path))
+        edits += gain_edits
+        changed["joint"] |= set(refs)
     names: dict[str, list[str]] = {"body": [], "site": [], "joint": []}
     obj = {
         "body": mujoco.mjtObj.mjOBJ_BODY,
@@ -310,10 +376,8 @@ def mjcf_with_values(
             elif kind == "site":
                 edit = _site_edit(spec, name, injected.site_pos[i], where)
             else:
-                ref = float(injected.qpos0[nominal.jnt_qposadr[i]])
-                if int(nominal.jnt_type[i]) == HINGE and spec.compiler.degree:
-                    ref = float(np.degrees(ref))
-                edit = _Edit({"ref": exact(ref)})
+                ref = refs.get(i, float(injected.qpos0[nominal.jnt_qposadr[i]]))
+                edit = _Edit({"ref": exact(float(_file_units(nominal, i, spec, ref)))})
             edits.append((where, edit))
     if out_dir is not None:
         edits += _relocated(tags, path.parent, Path(out_dir))
@@ -324,7 +388,8 @@ def mjcf_with_values(
     text = _apply(data, edits).decode("utf-8")
     if header:
         text = with_header(text, header)
-    return WrittenMjcf(text, *(tuple(names[k]) for k in ("body", "site", "joint")))
+    gained = tuple(scales) if scales else ()
+    return WrittenMjcf(text, *(tuple(names[k]) for k in ("body", "site", "joint")), gained)
 
 
 def with_header(text: str, header: str) -> str:

@@ -123,7 +123,7 @@ def forward_batch(
     if q0.ndim == 2 and q0.shape != (n, m.nq):
         raise ClosureError(f"start must be ({m.nq},) or ({n}, {m.nq}), got {q0.shape}")
     qpos = np.array(np.broadcast_to(q0, (n, m.nq)))
-    qpos[:, mech.actuator_qpos] = commands
+    qpos[:, mech.actuator_qpos] = mech.joints_of_commands(commands)
     fk = fast_kinematics(mech)
     plan = compiled_plan(fk) if compiled else None
     if plan is not None:
@@ -351,4 +351,4 @@ def predict_start(fk: FastKinematics, q: np.ndarray, commands: np.ndarray) -> No
     step *= np.minimum(1.0, MAX_STEP / np.maximum(norm, 1e-300))
     q[:] = home[:, None]
     integrate_soa(fk, q, step)
-    q[fk.mech.actuator_qpos] = commands.T
+    q[fk.mech.actuator_qpos] = fk.mech.joints_of_commands(commands).T

@@ -110,7 +110,7 @@ def _chord_newton(
     goal_r, goal_p = pose_to_frame(poses)
     with one_blas_thread():
         step_map = np.linalg.inv(jac)  # (N, A, 6)
-        c = start[:, mech.actuator_qpos].copy()
+        c = mech.commands_of_joints(start[:, mech.actuator_qpos]).copy()
         q = start.copy()
         best = np.full(len(poses), np.inf)
         best_c, best_q = c.copy(), q.copy()

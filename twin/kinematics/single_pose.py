@@ -140,7 +140,7 @@ def _solution(mech: Mechanism, q: np.ndarray, err: float, it: int) -> Solution:
         tool_rotation=d.site_xmat[mech.tool_site].reshape(3, 3).copy(),
         tool_position=d.site_xpos[mech.tool_site].copy(),
         targets=d.site_xpos[mech.target_sites].copy(),
-        actuators=q[mech.actuator_qpos].copy(),
+        actuators=mech.commands_of_joints(q[mech.actuator_qpos]).copy(),
         residual=err,
         iterations=it,
     )
@@ -158,7 +158,7 @@ def forward(
     few micrometres past a limit the command itself respects."""
     c = check_commands(mech, commands, stroke=check_stroke)
     q = np.array(mech.home_qpos if start is None else start, dtype=float)
-    q[mech.actuator_qpos] = c
+    q[mech.actuator_qpos] = mech.joints_of_commands(c)
     q, err, it = newton_solve(mech, q, mech.free_dofs())
     return _solution(mech, q, err, it)
 

@@ -196,7 +196,7 @@ class FastKinematics:
             self._predictor_key, self._predictor = key, None
             mech = self.mech
             try:
-                home = forward(mech, mech.home_qpos[mech.actuator_qpos], check_stroke=False)
+                home = forward(mech, mech.home_commands, check_stroke=False)
             except (ClosureError, WorkspaceError):
                 return None
             update_kinematics(mech, home.qpos)
