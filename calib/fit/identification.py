@@ -150,6 +150,8 @@ def identify(
             plain.values[free] - (0.0 if x0 is None else np.asarray(x0, dtype=float)[free]),
             physical_ranges(model.params)[free],
             plain.fit_pose_of_row,
+            # the offset kinds' sizes are no machine's known size: estimated in full
+            always=np.asarray(model.params.is_offset, dtype=bool)[free],
         )
         if choice.basis is None:
             return replace(plain, subspace=choice)

@@ -24,6 +24,7 @@ user's ``--prior-std``), so that the output says what it costs or gains on held-
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -91,11 +92,16 @@ def choose_subspace(
     pose_of_row: np.ndarray,
     folds: int = FOLDS,
     cuts: tuple[float | None, ...] = CUTS,
+    always: np.ndarray | None = None,
 ) -> SubspaceChoice:
     """The subspace to estimate in, from the plain least-squares fit's linearisation:
     ``residual`` (m,) there and ``jac`` (m, k + r) d residual / d (free parameters, then the
     registration's r); ``offsets`` (k,) the free parameters there minus their start values,
-    ``ranges`` (k,) SI, ``pose_of_row`` (m,). The data's residual scale is the plain fit's."""
+    ``ranges`` (k,) SI, ``pose_of_row`` (m,). The data's residual scale is the plain fit's.
+    ``always`` (k,) bool: parameters estimated in full beside the subspace, as the
+    registration is (those without a known physical size to measure weakness in)."""
+    if always is not None and np.any(always):
+        return _with_always(jac, residual, offsets, ranges, pose_of_row, folds, cuts, always)
     m, k = len(residual), len(ranges)
     sigma = math.sqrt(float(residual @ residual) / max(m - jac.shape[1], 1))
     a = jac[:, :k] * ranges
@@ -131,6 +137,24 @@ def choose_subspace(
         return SubspaceChoice(None, None, sigma, cv, n_weak, n_folds)
     v, _ = _kept(a, reg, sigma, chosen)
     return SubspaceChoice(chosen, ranges[:, None] * v, sigma, cv, n_weak, n_folds)
+
+
+def _with_always(jac, residual, offsets, ranges, pose_of_row, folds, cuts, always):
+    """:func:`choose_subspace` with the ``always`` columns moved beside the registration's,
+    its basis carried back to every free parameter (those columns' rows the identity)."""
+    always = np.asarray(always, dtype=bool)
+    k = len(ranges)
+    rest = np.flatnonzero(~always)
+    cols = np.hstack([jac[:, rest], jac[:, :k][:, always], jac[:, k:]])
+    # linear in them, the always-estimated columns' start is irrelevant, as the registration's
+    inner = choose_subspace(cols, residual, offsets[rest], ranges[rest], pose_of_row, folds, cuts)
+    if inner.basis is None:
+        return inner
+    n_always = int(np.sum(always))
+    basis = np.zeros((k, inner.basis.shape[1] + n_always))
+    basis[rest, : inner.basis.shape[1]] = inner.basis
+    basis[np.flatnonzero(always), inner.basis.shape[1] :] = np.eye(n_always)
+    return dataclasses.replace(inner, basis=basis)
 
 
 @dataclass(frozen=True)

@@ -88,8 +88,10 @@ def calibrate(
     unidentifiable: str = "fix",
     prior_spec: PriorSpec | None = None,
     regularise: bool = True,
+    start: np.ndarray | None = None,
 ) -> CalibrationRun:
-    """Identify from the rows of ``set_name`` (default: 'calibration' rows, else all).
+    """Identify from the rows of ``set_name`` (default: 'calibration' rows, else all),
+    from the values ``start`` (SI; default zero: the nominal model).
 
     Directions of the parameters the data determine worse than their physical range are kept
     at zero, the rest estimated, where cross-validation over poses says that predicts held-out
@@ -106,14 +108,14 @@ def calibrate(
     ranges = physical_ranges(model.params, prior_spec)
     choice = None
     if prior_spec is None:
-        result = _identified(model, obs, unidentifiable, options, None, regularise)
+        result = _identified(model, obs, unidentifiable, options, None, regularise, start)
     else:  # the user's widths, weighed against the residual the data show
-        plain = _identified(model, obs, unidentifiable, options, None, False)
+        plain = _identified(model, obs, unidentifiable, options, None, False, start)
         free = plain.estimated
         choice = choose_prior(
             plain.fit_jacobian,
             plain.fit_residual,
-            plain.values[free],
+            plain.values[free] - (0.0 if start is None else np.asarray(start)[free]),
             ranges[free],
             plain.fit_pose_of_row,
             plain.fit_jacobian.shape[1],
@@ -123,7 +125,7 @@ def calibrate(
         # gains and compliances free: the prior is on the geometry
         widths = np.where(np.asarray(model.params.is_geometric, bool), ranges, np.inf)
         prior = Prior(widths, choice.noise_sigma_m)
-        result = _identified(model, obs, unidentifiable, options, prior, False)
+        result = _identified(model, obs, unidentifiable, options, prior, False, start)
     try:
         verdict, residual, structure = judge(model, obs, result, accuracy, max_ratio, picked)
     except TwinError as exc:  # the estimate went where the machine does not close
@@ -160,6 +162,7 @@ def _identified(
     options: LMOptions | None,
     prior: Prior | None,
     regularise: bool,
+    start: np.ndarray | None = None,
 ) -> IdentificationResult:
     """:func:`identify` (weak directions kept at zero if ``regularise``), its failures as
     FitFailed with the likely causes."""
@@ -167,6 +170,7 @@ def _identified(
         return identify(
             model,
             obs,
+            x0=start,
             unidentifiable=unidentifiable,
             options=options,
             prior=prior,
