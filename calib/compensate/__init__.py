@@ -29,6 +29,10 @@ __all__, __getattr__, __dir__ = face(
             "compensate",
             "solve_each",
         ),
+        "run_state": (
+            "RunStateError",
+            "run_state",
+        ),
         "program": (
             "NominalTargets",
             "compensate_program",
