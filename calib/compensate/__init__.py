@@ -29,7 +29,7 @@ __all__, __getattr__, __dir__ = face(
             "compensate",
             "solve_each",
         ),
-        "run_state": (
+        "program_state": (
             "RunStateError",
             "run_state",
         ),
