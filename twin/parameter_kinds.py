@@ -23,11 +23,21 @@ from typing import Any
 import numpy as np
 
 from twin.exceptions import ParameterError
+from twin.offset_kinds import OFFSET_KINDS, offset_factor, offset_units
 
-KINDS = ("body_pos", "body_rot", "site_pos", "joint_zero", "actuator_gain", "joint_compliance")
+KINDS = (
+    "body_pos",
+    "body_rot",
+    "site_pos",
+    "joint_zero",
+    "actuator_gain",
+    "joint_compliance",
+    *OFFSET_KINDS,
+)
 GAIN = KINDS.index("actuator_gain")
 COMPLIANCE = KINDS.index("joint_compliance")
-ACTUATION_KINDS = ("actuator_gain", "joint_compliance")  # act through the commands
+# act through the commands (the offsets: twin.offset_kinds)
+ACTUATION_KINDS = ("actuator_gain", "joint_compliance", *OFFSET_KINDS)
 # display value per SI value of a compliance: deg/(kN m) per rad/(N m), mm/kN per m/N
 TURNING_FACTOR = float(np.degrees(1.0)) * 1e3
 SLIDING_FACTOR = 1e6
@@ -66,7 +76,22 @@ def si_units(params: Any) -> list[str]:
         "1" if g else "rad" if a else "m"
         for a, g in zip(params.is_angle, params.is_gain, strict=True)
     ]
-    return _compliance_units(params, out, "rad/(N m)", "m/N")
+    return _offset_units(params, _compliance_units(params, out, "rad/(N m)", "m/N"), True)
+
+
+def _offset_units(params: Any, out: list[str], si: bool) -> list[str]:
+    for k in np.flatnonzero(getattr(params, "is_offset", ())):
+        p = params.parameters[k]
+        out[k] = offset_units(p.kind, bool(params.turns[k]), p.constants_dict, si)
+    return out
+
+
+def _offset_factors(params: Any) -> np.ndarray:
+    """Display value per SI value of each parameter that is an offset kind (1 elsewhere)."""
+    out = np.ones(len(params.kind))
+    for k in np.flatnonzero(params.is_offset):
+        out[k] = offset_factor(params.parameters[k].kind, bool(params.turns[k]))
+    return out
 
 
 def display_units(params: Any) -> list[str]:
@@ -76,7 +101,7 @@ def display_units(params: Any) -> list[str]:
         "ppm" if g else "deg" if a else "mm"
         for a, g in zip(params.is_angle, params.is_gain, strict=True)
     ]
-    return _compliance_units(params, out, "deg/(kN m)", "mm/kN")
+    return _offset_units(params, _compliance_units(params, out, "deg/(kN m)", "mm/kN"), False)
 
 
 def _compliance_factor(params: Any) -> np.ndarray:
@@ -91,6 +116,8 @@ def to_display(params: Any, values: np.ndarray) -> np.ndarray:
     shown = np.where(params.is_gain, v * 1e6, shown) if params.has_gains else shown
     if params.has_compliance:
         shown = np.where(params.is_compliance, v * _compliance_factor(params), shown)
+    if np.any(getattr(params, "is_offset", False)):
+        shown = np.where(params.is_offset, v * _offset_factors(params), shown)
     return shown
 
 
@@ -101,4 +128,6 @@ def from_display(params: Any, values: Iterable[float]) -> np.ndarray:
     si = np.where(params.is_gain, v * 1e-6, si) if params.has_gains else si
     if params.has_compliance:
         si = np.where(params.is_compliance, v / _compliance_factor(params), si)
+    if np.any(getattr(params, "is_offset", False)):
+        si = np.where(params.is_offset, v / _offset_factors(params), si)
     return si

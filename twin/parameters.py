@@ -7,18 +7,18 @@ A parameter is one scalar deviation from the nominal MJCF, of one of five kinds:
   several rotations of one body compose as one rotation vector ``w = sum(axis_k v_k)``;
 * ``site_pos``: the site moves by ``value * axis``, axis in its body's frame;
 * ``joint_zero``: an encoder offset, the joint's true value is the commanded one + ``value``;
-* ``actuator_gain``: a scale error of an actuator (element: the actuator's name), a
-  dimensionless ``g``: the joint takes ``q0 + (c - q0)(1 + g)`` for the command ``c``, ``q0``
-  the joint's zero (its ``qpos0``). Files show it in ppm.
+* ``actuator_gain``: a scale error of an actuator (element: the actuator's name), ``g``: the
+  joint takes ``q0 + (c - q0)(1 + g)`` for the command ``c``, ``q0`` its zero (ppm in files).
 * ``joint_compliance``: an actuator that yields to its static gravity load (element: the
-  actuator's name): the joint takes ``q = c - k tau(q)``, ``tau`` the force or torque the
-  actuator holds at the pose. With ``payload_kg`` m, ``tau`` is the load of the model's own
-  masses plus m kilograms at the tool site and ``k`` a compliance (rad/(N m), m/N; files
-  deg/(kN m), mm/kN); without it, the load of one kilogram at the tool site alone and ``k``
-  the compliance times the payload's mass (per kg: the units times kg), what a model without
-  declared masses can know. The calibration model computes the loads (calib.fit.joint_compliance).
+  actuator's name): ``q = c - k tau(q)``, ``tau`` the load at the pose of the model's own
+  masses plus ``payload_kg`` at the tool site (without it, of 1 kg there alone, ``k`` per kg:
+  twin.parameter_kinds); the calibration model computes the loads (calib.fit.joint_compliance).
+* the offset kinds (``periodic_error``, ``backlash``, ``drift``, ``thermal_growth``,
+  ``thermal_expansion``; element: the actuator's name): the joint value plus ``v phi`` with
+  ``phi`` of the command and of the state at the reading, shaped by the parameter's
+  ``constants`` (period, phase, time constant, clock, origin: twin.offset_kinds).
 
-The first four are geometry; a gain or a compliance acts on the commands, not on the model:
+The first four are geometry; the others act on the commands, not on the model:
 injection leaves it out, its screw is zero and it moves no site at a given configuration (its
 identification columns come from the calibration model, which maps commands to joint values
 through it). The Jacobians of twin.kinematics.sensitivity and twin.kinematics.sensitivity_batch
@@ -44,6 +44,8 @@ import mujoco
 import numpy as np
 
 from twin.exceptions import ParameterError
+from twin.offset_kinds import OFFSET_KINDS, check_constants, check_joint
+from twin.parameter_elements import actuated_joint, element_id
 from twin.parameter_kinds import (
     ACTUATION_KINDS,
     COMPLIANCE,
@@ -70,6 +72,13 @@ class Parameter:
     element: str
     axis: tuple[float, float, float] = (0.0, 0.0, 0.0)
     payload_kg: float | None = None  # a joint_compliance's tool payload (None: per kg)
+    # an offset kind's constants, (key, value) pairs (twin.offset_kinds.CONSTANTS); a dict
+    # is accepted and stored sorted
+    constants: tuple[tuple[str, float | str], ...] = ()
+
+    @property
+    def constants_dict(self) -> dict[str, float | str]:
+        return dict(self.constants)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -102,6 +111,15 @@ class Parameter:
         ):
             raise ParameterError(f"parameter '{self.name}': axis {self.axis!r} must be 3 numbers")
         check_payload(self.name, self.kind, self.payload_kg)
+        raw = self.constants.items() if isinstance(self.constants, dict) else self.constants
+        try:
+            consts = tuple(sorted((str(k), v) for k, v in raw))
+        except (TypeError, ValueError):
+            raise ParameterError(
+                f"parameter '{self.name}': constants {raw!r} are no pairs"
+            ) from None
+        object.__setattr__(self, "constants", consts)
+        check_constants(self.name, self.kind, dict(consts))
         if self.kind not in ("joint_zero", *ACTUATION_KINDS):
             n = float(np.linalg.norm(self.axis))
             if not np.isclose(n, 1.0, atol=1e-9):
@@ -129,19 +147,21 @@ class ParameterSet:
         self.is_angle = np.zeros(n, dtype=bool)
         self.is_gain = self.kind == GAIN
         self.is_compliance = self.kind == COMPLIANCE
-        self.is_geometric = ~(self.is_gain | self.is_compliance)
+        self.is_offset = np.isin(self.kind, [KINDS.index(k) for k in OFFSET_KINDS])
+        self.is_geometric = ~(self.is_gain | self.is_compliance | self.is_offset)
         # a compliance's payload (kg; NaN: per kg of payload) and whether its joint turns
         self.payload_kg = np.array(
             [np.nan if p.payload_kg is None else float(p.payload_kg) for p in self.parameters]
         )
         self.turns = np.zeros(n, dtype=bool)
         for k, p in enumerate(self.parameters):
-            i = _element_id(model, p)
+            i = element_id(model, p)
             self.element[k] = i
             if p.kind in ACTUATION_KINDS:
-                j = _actuated_joint(model, p, i)
+                j = actuated_joint(model, p, i)
                 self.body[k] = model.jnt_bodyid[j]
                 self.turns[k] = int(model.jnt_type[j]) == HINGE
+                check_joint(p.name, p.kind, p.constants_dict, bool(self.turns[k]))
             elif p.kind == "site_pos":
                 self.body[k] = model.site_bodyid[i]
             elif p.kind == "joint_zero":
@@ -192,6 +212,8 @@ class ParameterSet:
             self.is_geometric = ~self.is_gain
             self.payload_kg = np.full(len(self.kind), np.nan)
             self.turns = np.zeros(len(self.kind), dtype=bool)
+        if "is_offset" not in state:  # pickled before the offset kinds
+            self.is_offset = np.zeros(len(self.kind), dtype=bool)
         if len(state.get("_of_kind", ())) != len(KINDS):  # pickled before the kinds were indexed
             self._index_kinds()
         self._local = threading.local()
@@ -306,7 +328,7 @@ class ParameterSet:
                 o[k] = data.xpos[par] + xmat[par] @ model.body_pos[i]
             elif kind == 2:
                 t[k] = xmat[model.site_bodyid[i]] @ self.axis[k]
-            elif kind in (GAIN, COMPLIANCE):  # no motion at a given configuration
+            elif not self.is_geometric[k]:  # no motion at a given configuration
                 continue
             elif self.is_angle[k]:
                 w[k] = data.xaxis[i]
@@ -378,45 +400,6 @@ class ParameterSet:
         dp *= affected[:, :, None]
         dw = w[None, :, :] * affected[:, :, None]
         return dp.transpose(0, 2, 1), dw.transpose(0, 2, 1)
-
-
-def _names(model: mujoco.MjModel, obj: mujoco.mjtObj, count: int) -> list[str]:
-    return [n for n in (mujoco.mj_id2name(model, obj, i) for i in range(count)) if n]
-
-
-def _element_id(model: mujoco.MjModel, p: Parameter) -> int:
-    """The id of ``p``'s element; a clear error (with the closest name) if there is none."""
-    obj, count = {
-        "body_pos": (mujoco.mjtObj.mjOBJ_BODY, model.nbody),
-        "body_rot": (mujoco.mjtObj.mjOBJ_BODY, model.nbody),
-        "site_pos": (mujoco.mjtObj.mjOBJ_SITE, model.nsite),
-        "joint_zero": (mujoco.mjtObj.mjOBJ_JOINT, model.njnt),
-        "actuator_gain": (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu),
-        "joint_compliance": (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu),
-    }[p.kind]
-    i = mujoco.mj_name2id(model, obj, p.element)
-    if i < 0:
-        what = obj.name[6:].lower()
-        near = difflib.get_close_matches(p.element, _names(model, obj, count), n=1)
-        hint = f" (did you mean '{near[0]}'?)" if near else ""
-        raise ParameterError(
-            f"parameter '{p.name}': the model has no {what} named '{p.element}'{hint}"
-        )
-    return int(i)
-
-
-def _actuated_joint(model: mujoco.MjModel, p: Parameter, actuator: int) -> int:
-    """The slide or hinge joint that actuator ``actuator`` drives (a gain scales its travel,
-    a compliance yields it)."""
-    j = int(model.actuator_trnid[actuator, 0])
-    if int(model.actuator_trntype[actuator]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(
-        model.jnt_type[j]
-    ) not in (HINGE, SLIDE):
-        raise ParameterError(
-            f"parameter '{p.name}': actuator '{p.element}' does not drive a slide or hinge "
-            f"joint, so it has no {p.kind}"
-        )
-    return j
 
 
 def require_geometry(params: ParameterSet, what: str) -> None:

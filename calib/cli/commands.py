@@ -127,10 +127,17 @@ def _print_run(run: CalibrationRun) -> None:
         print(f"  near-collinear (|r| > 0.95): {', '.join(group)}")
 
 
+def _say_directions(model, state) -> None:
+    """Where the approach directions of a backlash came from (a column or the order)."""
+    if model.offsets is not None and "direction" in model.offsets.needs and state is not None:
+        print(f"approach directions: {state.source}")
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     run = run_fit(args)
     if isinstance(run, int):
         return run
+    _say_directions(run.model, run.obs.state)
     _print_run(run)
     print_verdict(run.verdict)
     if args.out:
@@ -175,6 +182,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
         )
     v, selection = verify_result(model, loaded, dataset, args.set)
     print(selection)
+    _say_directions(model, model.state)
     print(v.note)
     for side in ("before", "after"):
         print(getattr(v, side).line(f"{side:6s}"))

@@ -6,12 +6,15 @@ import argparse
 import math
 import sys
 
-from calib.data import CalibrationResult, read_dataset
+import numpy as np
+
+from calib.data import CalibrationResult, Dataset, read_dataset
 from calib.fit import (
     EXIT_BAD_INPUT,
     EXIT_OK,
     EXIT_POOR_FIT,
     MAX_SIGMA_MM,
+    CalibrationModel,
     CalibrationRun,
     FitFailed,
     PriorSpec,
@@ -84,24 +87,46 @@ def failed(exc: FitFailed) -> int:
 
 def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
     model = model_from_files(args.model, args.errors)
+    base = model
     effect = getattr(args, "with_effect", None)
     if effect:  # the effect a diagnosis named, as parameters of the error model
         model = extended_model(model, load_effect(effect, model)["added_parameters"], effect)
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
+    options = {
+        "set_name": args.set,
+        "sigma_mm": args.sigma_mm,
+        "max_ratio": args.max_ratio,
+        "max_iterations": args.max_iterations,
+        "unidentifiable": "raise" if getattr(args, "require_all", False) else "fix",
+        "prior_spec": getattr(args, "prior_std", None),
+        "regularise": not getattr(args, "plain", False),
+    }
     try:
-        return calibrate(
-            model,
-            dataset,
-            set_name=args.set,
-            sigma_mm=args.sigma_mm,
-            max_ratio=args.max_ratio,
-            max_iterations=args.max_iterations,
-            unidentifiable="raise" if getattr(args, "require_all", False) else "fix",
-            prior_spec=getattr(args, "prior_std", None),
-            regularise=not getattr(args, "plain", False),
-        )
+        start = _geometric_start(base, model, dataset, options) if effect else None
+        return calibrate(model, dataset, start=start, **options)
     except FitFailed as exc:
         return failed(exc)
+
+
+def _geometric_start(
+    base: CalibrationModel, model: CalibrationModel, dataset: Dataset, options: dict
+) -> np.ndarray | None:
+    """The start of a fit with a diagnosed effect: the geometric fit's estimate, where the
+    diagnosis formed the effect's columns (an added parameter can move the readings there
+    and not at the nominal model: a joint with the nominal reflector on its axis), the added
+    parameters at zero. None (the nominal start) when the geometric fit is refused."""
+    geo = calibrate(base, dataset, **{**options, "max_ratio": None})
+    if not geo.verdict.ok:
+        return None
+    names = list(model.params.names)
+    start = np.zeros(model.n_parameters)
+    for name, value in zip(geo.result.names, geo.result.values, strict=True):
+        start[names.index(name)] = value
+    print(
+        f"start: the geometric fit's estimate ({geo.residual['rms_mm']:.4f} mm RMS), the "
+        f"{model.n_parameters - base.n_parameters} added parameters at zero"
+    )
+    return start
 
 
 def result_options(p: argparse.ArgumentParser) -> None:

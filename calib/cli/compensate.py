@@ -29,6 +29,13 @@ past a stroke is named with the actuator and by how much; the others are written
 when every pose was reachable, 5 when some were not, 2 on bad input (nothing written); a
 result identify refused: identify's exit code and reason, nothing written, unless ``--force``.
 
+A result whose error model reads the state at each target (a backlash: the approach
+direction; a thermal growth or drift: the time; a thermal expansion: the temperature) is
+compensated at the state the program will run at: the program's ``dir:<actuator>``,
+``order``, ``time_s``, ``temperature_c`` columns, else ``--time-s`` / ``--temperature-c`` for
+every target, the directions else from the program's own sequence
+(calib.compensate.run_state); which it used is said, a missing one refused by name.
+
 With ``--diagnosis D.json`` the machine compensated is the identified one with the effect the
 diagnosis named: the result must be the one ``identify --with D.json`` wrote (geometry and
 effect fitted together, the effect's parameters among the result's); a result fitted without
@@ -57,6 +64,7 @@ from calib.compensate import (
     nearest_targets,
     nominal_commands_error,
     nominal_targets,
+    run_state,
     solve_each,
 )
 from calib.data import (
@@ -111,6 +119,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="D.json",
         help="the diagnosis whose named effect the result carries (identify --with D.json): "
         "checked, and the machine compensated with it",
+    )
+    p.add_argument(
+        "--time-s",
+        type=float,
+        default=None,
+        help="the time since warm-up (s) at which the program will run, for a result's "
+        "thermal growth or drift (or a time_s column of the program)",
+    )
+    p.add_argument(
+        "--temperature-c",
+        type=float,
+        default=None,
+        help="the temperature (deg C) at which the program will run, for a result's thermal "
+        "expansion (or a temperature_c column of the program)",
     )
     p.add_argument(
         "--frame",
@@ -352,6 +374,16 @@ def run(args: argparse.Namespace) -> int:
     }
     labels = None
     where = ""
+    program = None
+    if not args.poses:
+        program = read_program(args.commands, mech.actuator_names, mech.actuator_is_slide)
+    n = len(program) if program is not None else len(read_desired_poses(args.poses))
+    state, said = run_state(machine.model, program, n, args.time_s, args.temperature_c)
+    machine.model.bind_state(state)  # the targets' state, for the kinds that read it
+    for line in said:
+        print(line)
+    if said:
+        inputs["state"] = said
     if args.poses:
         desired = read_desired_poses(args.poses)
         frame = args.frame or "base"
@@ -378,7 +410,7 @@ def run(args: argparse.Namespace) -> int:
         head = f"compensated {int(comp.reachable.sum())} of {len(desired)} poses ({where})"
         lines = [seeds.sentence, _residual_line(comp, "the nominal commands", where)]
     else:
-        program = read_program(args.commands, mech.actuator_names, mech.actuator_is_slide)
+        assert program is not None
         reg0 = nominal_registration(model, machine.result)
         comp = compensate_program(machine, program.commands, program.pose_ids, reg0)
         comp, where = honest_before(machine, comp, model)

@@ -195,7 +195,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             "effect_parameters": diag.effect_parameters,
             "residual_structure": diag.structure_detail,
             "metric": "3D position error per reading |p_measured - p_model| (mm)",
-            "effect": effect_content(run.model, diag.chosen, diag.effect_parameters),
+            "effect": effect_content(
+                run.model, diag.chosen, diag.effect_parameters, diag.time_unit, diag.time_origin
+            ),
         }
         if diag.test is not None:
             content["test"] = {

@@ -30,6 +30,10 @@ __all__, __getattr__, __dir__ = face(
             "compensate",
             "solve_each",
         ),
+        "program_state": (
+            "RunStateError",
+            "run_state",
+        ),
         "program": (
             "NominalTargets",
             "compensate_program",

@@ -82,6 +82,10 @@ class Dataset:
     readings: NDArray[np.float64]
     order: NDArray[np.int64] | None = None
     time_s: NDArray[np.float64] | None = None
+    # the temperature at each reading (deg C), and each actuator's approach direction (+1/-1,
+    # 0: it did not move), for the error model's thermal and backlash kinds
+    temperature_c: NDArray[np.float64] | None = None
+    direction: NDArray[np.float64] | None = None
     commanded_poses: NDArray[np.float64] | None = None
     tracker: dict[str, Any] | None = None
     meta: dict[str, Any] | None = None
@@ -120,6 +124,16 @@ class Dataset:
             put("order", _array(self.order, "order", (n,), integer=True))
         if self.time_s is not None:
             put("time_s", _array(self.time_s, "time_s", (n,)))
+        if self.temperature_c is not None:
+            put("temperature_c", _array(self.temperature_c, "temperature_c", (n,)))
+        if self.direction is not None:
+            d = _array(self.direction, "direction", (n, len(acts)))
+            if not np.all(np.isin(d, (-1.0, 0.0, 1.0))):
+                raise DatasetError(
+                    "direction (the dir:<actuator> columns) must be +1 or -1 (0: the actuator "
+                    f"did not move), got {sorted(set(d[~np.isin(d, (-1.0, 0.0, 1.0))]))[:3]}"
+                )
+            put("direction", d)
         if self.commanded_poses is not None:
             put("commanded_poses", _array(self.commanded_poses, "commanded_poses", (n, 6)))
         for key in ("tracker", "meta"):
@@ -185,6 +199,8 @@ class Dataset:
             readings=self.readings[idx],
             order=take(self.order),
             time_s=take(self.time_s),
+            temperature_c=take(self.temperature_c),
+            direction=take(self.direction),
             commanded_poses=take(self.commanded_poses),
         )
 
@@ -223,4 +239,5 @@ class Dataset:
             target_names=tuple(target_names),
             commands=self.commands[:, a],
             readings=self.readings[:, t],
+            direction=None if self.direction is None else self.direction[:, a],
         )

@@ -33,8 +33,9 @@ from common.write_set import write_files
 from twin.formats.parameter_file import closest, read_utf8
 
 CMD_PREFIX = "cmd:"
+DIR_PREFIX = "dir:"  # each actuator's approach direction, +1/-1 (all actuators or none)
 REQUIRED_COLUMNS = ("pose_id", "set", "target", "repeat", "x_mm", "y_mm", "z_mm")
-OPTIONAL_COLUMNS = ("order", "time_s")
+OPTIONAL_COLUMNS = ("order", "time_s", "temperature_c")
 POSE_COLUMNS = ("pose_x_mm", "pose_y_mm", "pose_z_mm", "pose_rx_deg", "pose_ry_deg", "pose_rz_deg")
 INT64 = (-(2**63), 2**63 - 1)  # pose_id, repeat and order are stored as int64
 # No laser tracker or motion-capture system measures a machine from a kilometre away (trackers
@@ -72,7 +73,9 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
     cmd_cols = [CMD_PREFIX + a for a in ds.actuator_names]
     header = ["pose_id", "set", "target", "repeat"]
     header += [c for c in OPTIONAL_COLUMNS if getattr(ds, c) is not None]
-    header += cmd_cols + (list(POSE_COLUMNS) if ds.commanded_poses is not None else [])
+    dir_cols = [] if ds.direction is None else [DIR_PREFIX + a for a in ds.actuator_names]
+    header += cmd_cols + dir_cols
+    header += list(POSE_COLUMNS) if ds.commanded_poses is not None else []
     header += ["x_mm", "y_mm", "z_mm"]
     commands = _file_commands(ds.commands, ds.actuator_units)
     points = ds.readings * 1000.0
@@ -81,11 +84,14 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
     writer.writerow(header)
     for p in range(ds.n_poses):
         per_pose = [_fmt(v) for v in commands[p]]
+        if ds.direction is not None:
+            per_pose += [str(int(v)) for v in ds.direction[p]]
         if ds.commanded_poses is not None:
             cp = ds.commanded_poses[p]
             per_pose += [_fmt(v) for v in (*(cp[:3] * 1000.0), *np.rad2deg(cp[3:]))]
         extra = [] if ds.order is None else [str(int(ds.order[p]))]
         extra += [] if ds.time_s is None else [_fmt(ds.time_s[p])]
+        extra += [] if ds.temperature_c is None else [_fmt(ds.temperature_c[p])]
         for t, target in enumerate(ds.target_names):
             for r in range(ds.n_repeats):
                 xyz = [_fmt(v) for v in points[p, t, r]]
@@ -196,7 +202,9 @@ def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[st
     declared = {CMD_PREFIX + a for a in actuators}
     undeclared = [h for h in header if h.startswith(CMD_PREFIX) and h not in declared]
     pose = [c for c in POSE_COLUMNS if c in header]
-    known = {*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS, *POSE_COLUMNS, *declared}
+    dirs = {DIR_PREFIX + a for a in actuators}
+    dir_given = [h for h in header if h.startswith(DIR_PREFIX)]
+    known = {*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS, *POSE_COLUMNS, *declared, *dirs}
     unknown = [h for h in header if h not in known and h not in undeclared]
     if not set(header) & ({*known, *undeclared} - set(OPTIONAL_COLUMNS)):
         shown = ",".join(header)
@@ -211,6 +219,10 @@ def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[st
         (no_cmd, "actuator(s) declared in the sidecar without a 'cmd:<name>' column"),
         (undeclared, "column(s) for actuators not declared in the sidecar"),
         ([c for c in POSE_COLUMNS if pose and c not in pose], "missing commanded-pose column(s)"),
+        (
+            sorted(dirs - set(dir_given)) if dir_given else [],
+            "missing approach-direction column(s) (dir:<actuator> for every actuator or none)",
+        ),
         (unknown, "unknown column(s)"),
     ):
         if bad:
@@ -342,12 +354,14 @@ def read_csv_dataset(
         raise DatasetError(f"{path}: no data rows")
     pose_cols = ["set", *(CMD_PREFIX + a for a in acts)]
     pose_cols += [c for c in (*OPTIONAL_COLUMNS, *POSE_COLUMNS) if c in col]
+    pose_cols += [DIR_PREFIX + a for a in acts if DIR_PREFIX + a in col]
     poses = _group_rows(path, rows, col, pose_cols, targets)
     n_rep = _n_repeats(path, poses, targets)
     recs = list(poses.values())
     table = np.array([vals[1:] for _, vals, _ in recs], dtype=float).reshape(len(recs), -1)
     units = [side["actuators"][a] for a in acts]
     opt = {c: table[:, i] for i, c in enumerate(pose_cols[1:]) if not c.startswith(CMD_PREFIX)}
+    dirs = [opt.pop(DIR_PREFIX + a) for a in acts if DIR_PREFIX + a in opt]
     cposes = None
     if "pose_x_mm" in opt:
         cposes = np.stack([opt[c] for c in POSE_COLUMNS], axis=1)
@@ -368,6 +382,8 @@ def read_csv_dataset(
             readings=readings / 1000.0,
             order=opt["order"].astype(np.int64) if "order" in opt else None,
             time_s=opt.get("time_s"),
+            temperature_c=opt.get("temperature_c"),
+            direction=np.stack(dirs, axis=1) if dirs else None,
             commanded_poses=cposes,
             tracker=side.get("tracker"),
             meta=side.get("meta"),

@@ -125,7 +125,9 @@ def likely_causes(
     frame: str = "base",
 ) -> list[str]:
     """Every hint that the data shows, most specific first (nominal model, cold starts)."""
+    state = model.state
     model = CalibrationModel(model.nominal, model.params)  # no warm start from a failed fit
+    model.bind_state(state)  # of these readings, for the offset kinds
     x0 = np.zeros(model.n_parameters)
     hints: list[str] = []
     try:

@@ -1,13 +1,17 @@
 """A robot's program: the joint targets its controller runs, as a CSV in millimetres and degrees.
 
-    pose_id,cmd:<actuator 1>,...,cmd:<actuator A>[,any other column]
+    pose_id,cmd:<actuator 1>,...,cmd:<actuator A>[,order][,time_s][,temperature_c]
+        [,dir:<actuator 1>,...,dir:<actuator A>][,any other column]
 
 One ``cmd:<actuator>`` column per actuator of the model (mm for a prismatic actuator, deg for
 a revolute one: the units of datasets); ``pose_id`` is any label. Other columns are ignored,
 so that a Dataset CSV (several rows per pose: targets, repeats) or a corrected commands file
 is a program too: the rows of one ``pose_id`` must then give the same commands, and the
 program holds one target per ``pose_id`` in the order of first appearance. Blank lines and
-lines starting with ``#`` are skipped; UTF-8 (a byte-order mark is accepted). A malformed
+lines starting with ``#`` are skipped; ``order``, ``time_s``, ``temperature_c`` and the
+``dir:<actuator>`` approach directions (+1/-1, every actuator or none) are the state at which
+each target will run, for the error model's kinds that read it (calib.fit.kinds);
+UTF-8 (a byte-order mark is accepted). A malformed
 file raises :class:`ProgramError` naming the file, line and column; nothing is guessed.
 """
 
@@ -17,7 +21,7 @@ import csv
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +30,8 @@ from calib.exceptions import CalibError
 from twin.formats.parameter_file import closest, read_utf8
 
 CMD_PREFIX = "cmd:"
+DIR_PREFIX = "dir:"
+STATE_COLUMNS = ("order", "time_s", "temperature_c")
 
 
 class ProgramError(CalibError):
@@ -39,6 +45,8 @@ class Program:
     path: Path
     pose_ids: tuple[str, ...]
     commands: np.ndarray  # (N, A), the order of the model's actuators
+    # the state columns given (order, time_s, temperature_c: (N,); direction: (N, A))
+    state: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.pose_ids)
@@ -64,7 +72,15 @@ def _columns(path: Path, line: int, cells: list[str], actuators: Sequence[str]) 
             f"{path}, line {line}: missing column(s) {missing}: a program gives every "
             "actuator's command (mm or deg)"
         )
-    return {name: names.index(name) for name in ["pose_id", *wanted]}
+    dirs = [DIR_PREFIX + a for a in actuators]
+    given = [d for d in dirs if d in names]
+    if given and len(given) != len(dirs):
+        raise ProgramError(
+            f"{path}, line {line}: missing approach-direction column(s) "
+            f"{[d for d in dirs if d not in names]} (dir:<actuator> for every actuator or none)"
+        )
+    state = [c for c in STATE_COLUMNS if c in names] + given
+    return {name: names.index(name) for name in ["pose_id", *wanted, *state]}
 
 
 def _number(path: Path, line: int, column: str, text: str) -> float:
@@ -118,8 +134,17 @@ def read_program(
         raise ProgramError(f"{path}: empty file (no header pose_id,cmd:<actuator>,...)")
     if not rows:
         raise ProgramError(f"{path}: no joint targets after the header")
-    commands = np.array([v for _, v in rows.values()]) * scale
-    return Program(path, tuple(rows), commands)
+    table = np.array([v for _, v in rows.values()])
+    n_act = len(actuators)
+    names = list(columns)[1 + n_act :]
+    state = {c: table[:, n_act + i] for i, c in enumerate(names) if not c.startswith(DIR_PREFIX)}
+    dirs = [n_act + i for i, c in enumerate(names) if c.startswith(DIR_PREFIX)]
+    if dirs:
+        d = table[:, dirs]
+        if not np.all(np.isin(d, (-1.0, 0.0, 1.0))):
+            raise ProgramError(f"{path}: the dir:<actuator> columns must be +1 or -1 (0: no move)")
+        state["direction"] = d
+    return Program(path, tuple(rows), table[:, :n_act] * scale, state)
 
 
 def parse_seed(text: str, actuators: Sequence[str], is_slide: Sequence[bool]) -> np.ndarray:

@@ -52,5 +52,7 @@ def subset(dataset: Dataset, mask: np.ndarray) -> Dataset:
         readings=cut(dataset.readings),
         order=cut(dataset.order),
         time_s=cut(dataset.time_s),
+        temperature_c=cut(dataset.temperature_c),
+        direction=cut(dataset.direction),
         commanded_poses=cut(dataset.commanded_poses),
     )

@@ -34,6 +34,7 @@ import numpy as np
 
 from calib.diagnosis.gravity import GravityLoads
 from calib.fit.joint_compliance import ComplianceMap, acting_actuators, load_columns
+from calib.fit.kinds import OffsetMap
 from twin.exceptions import ParameterError
 from twin.kinematics.inverse_batch import actuator_joint_parameters
 from twin.mechanism import Mechanism
@@ -125,6 +126,8 @@ class ColumnPlan:
     gains: GainMap | None  # the model's gains
     compliance: ComplianceMap | None  # the model's compliances
     actuator_qpos: np.ndarray  # (A,)
+    is_offset: np.ndarray | None = None  # (m,) an offset kind's column (calib.fit.kinds)
+    offset_columns: OffsetMap | None = None  # the offset parameters of those columns
 
     @classmethod
     def of(
@@ -158,6 +161,8 @@ class ColumnPlan:
         if extra is not None:
             sets.append((extra, np.arange(len(extra))))
         source, actuator, is_gain, is_comp, payload = [], [], [], [], []
+        is_off: list[bool] = []
+        off_params, off_actuator, off_turns = [], [], []
         k_geo = n_idx + n_act
         for ps, chosen_cols in sets:
             acting = acting_actuators(ps, mech)
@@ -176,6 +181,20 @@ class ColumnPlan:
                 is_gain.append(bool(ps.is_gain[c]))
                 is_comp.append(bool(ps.is_compliance[c]))
                 payload.append(float(ps.payload_kg[c]))
+                is_off.append(bool(ps.is_offset[c]))
+                if is_off[-1]:
+                    off_params.append(ps.parameters[c])
+                    off_actuator.append(acting[c])
+                    off_turns.append(bool(ps.turns[c]))
+        offsets = None
+        if off_params:
+            offsets = OffsetMap(
+                tuple(off_params),
+                np.array(off_actuator, dtype=int),
+                np.array(off_turns, dtype=bool),
+                np.arange(len(off_params)),
+                mech.n_actuators,
+            )
         return cls(
             chosen,
             index,
@@ -187,6 +206,8 @@ class ColumnPlan:
             gains,
             ComplianceMap.of(params, mech),
             np.asarray(mech.actuator_qpos, dtype=int),
+            np.array(is_off, dtype=bool),
+            offsets,
         )
 
     @property
@@ -196,6 +217,25 @@ class ColumnPlan:
         return bool(np.any(self.is_compliance)) or (
             self.compliance is not None and bool(np.any(self.is_gain))
         )
+
+    def offset_inputs(
+        self, model: object, values: np.ndarray, commands: np.ndarray | None
+    ) -> tuple[np.ndarray | None, np.ndarray | None] | None:
+        """What :meth:`assemble` needs of the offset kinds at the ``commands`` (their rows'
+        state bound to ``model``, a CalibrationModel): the basis of the offset columns and the
+        model's joint offsets; None when no column is an offset's and the model has none."""
+        own = getattr(model, "offsets", None)
+        if self.offset_columns is None and own is None:
+            return None
+        if commands is None:
+            raise ValueError(
+                "the offset kinds' columns need the commands of the poses (a Prediction of "
+                "CalibrationModel.predict carries them)"
+            )
+        basis = None
+        if self.offset_columns is not None:
+            basis = self.offset_columns.basis(commands, getattr(model, "state", None))
+        return basis, model.offsets_at(values, commands)  # type: ignore[attr-defined]
 
     def values_for(self, values: np.ndarray) -> np.ndarray:
         """The values of ``params`` at the model's ``values``: the added ones at zero."""
@@ -209,11 +249,13 @@ class ColumnPlan:
         qpos: np.ndarray,
         zero: np.ndarray,
         loads: GravityLoads | None = None,
+        shifts: tuple[np.ndarray | None, np.ndarray | None] | None = None,
     ) -> np.ndarray:
         """The returned columns (N, rows, m) from the twin's Jacobian ``jac`` (N, rows, n) of
         ``params`` at the closed configurations ``qpos`` (N, nq) of the model at ``values``,
         whose actuated joints' zeros are ``zero`` (A,); ``loads``: the gravity loads at
-        ``qpos`` (when :attr:`needs_loads`)."""
+        ``qpos`` (when :attr:`needs_loads`); ``shifts``: :meth:`offset_inputs`' (the offset
+        columns' basis, the model's joint offsets)."""
         out = jac[:, :, self.source]
         act = self.actuator >= 0
         if not np.any(act):
@@ -225,6 +267,8 @@ class ColumnPlan:
             if self.compliance is not None:  # the joint value before it yields
                 assert loads is not None, "a gain's travel under compliances needs the loads"
                 joints = joints + self.compliance.deflection(values, loads)
+            if shifts is not None and shifts[1] is not None:  # the gained value alone
+                joints = joints - shifts[1]
             travel = (joints - zero) / (1.0 + g)  # c - q0, (N, A)
             out[:, :, gain_cols] *= travel[:, None, self.actuator[gain_cols]]
         comp_cols = np.flatnonzero(self.is_compliance)
@@ -232,7 +276,12 @@ class ColumnPlan:
             assert loads is not None, "compliance columns need the loads"
             load = load_columns(loads, self.actuator[comp_cols], self.payload_kg[comp_cols])
             out[:, :, comp_cols] *= -load[:, None, :]
-        zero_cols = np.flatnonzero(act & ~self.is_gain & ~self.is_compliance)
+        off = np.zeros(len(self.source), bool) if self.is_offset is None else self.is_offset
+        off_cols = np.flatnonzero(off)
+        if off_cols.size:
+            assert shifts is not None and shifts[0] is not None, "offset columns need a basis"
+            out[:, :, off_cols] *= shifts[0][:, None, :]
+        zero_cols = np.flatnonzero(act & ~self.is_gain & ~self.is_compliance & ~off)
         if zero_cols.size:
             out[:, :, zero_cols] *= 1.0 + g[self.actuator[zero_cols]]
         return out

@@ -127,6 +127,8 @@ def identify(
     ``subspace="auto"`` estimates in the subspace the data determine and keeps the weak
     directions at zero (calib.fit.regularisation.choose_subspace); "full" estimates every
     identifiable parameter."""
+    if model.offsets is not None:  # the offset kinds read the readings' state
+        model.bind_state(obs.state)
     if unidentifiable not in ("raise", "fix"):
         raise ValueError(f"unidentifiable must be 'raise' or 'fix', got {unidentifiable!r}")
     if obs.frame not in FRAMES:
@@ -150,6 +152,8 @@ def identify(
             ranges,
             plain.fit_pose_of_row,
             one_se=plain.converged,
+            # the offset kinds' sizes are no machine's known size: estimated in full
+            always=np.asarray(model.params.is_offset, dtype=bool)[free],
         )
         res = plain
         if choice.basis is not None:

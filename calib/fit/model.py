@@ -20,6 +20,7 @@ import numpy as np
 from calib.diagnosis.gravity import GravityLoads, gravity_loads
 from calib.fit.actuator_gains import ColumnPlan, GainMap
 from calib.fit.joint_compliance import ComplianceMap, Settled, settle
+from calib.fit.kinds import OffsetMap, PoseState
 from twin.exceptions import ModelError
 from twin.kinematics.batch import forward_batch
 from twin.kinematics.sensitivity_batch import (
@@ -36,6 +37,7 @@ from twin.workspace import check_command_strokes, solve_poses
 class Prediction:
     targets: np.ndarray  # (P, T, 3) metres
     qpos: np.ndarray  # (P, nq) closed configurations, for the Jacobian
+    commands: np.ndarray | None = None  # (P, A) the commands, for the offsets' columns
 
 
 class CalibrationModel:
@@ -65,6 +67,23 @@ class CalibrationModel:
         self.compliance = ComplianceMap.of(params, nominal)  # None without joint compliances
         self._every_column: ColumnPlan | None = None  # with gains or compliances: _columns
         self._loads: tuple[bytes, GravityLoads] | None = None  # at the last settled poses
+        self.offsets = OffsetMap.of(params, nominal)  # None without offset kinds
+        self.state: PoseState | None = None  # of the readings the commands are of
+
+    def bind_state(self, state: PoseState | None) -> None:
+        """The state (approach directions, time, temperature) of the readings whose commands
+        the model is given next: the offset kinds read it row by row (calib.fit.kinds)."""
+        self.state = state
+
+    def offsets_at(self, values: np.ndarray, commands: np.ndarray) -> np.ndarray | None:
+        """The joint offsets (N, A) of the offset kinds at the commands (None without)."""
+        if self.offsets is None:
+            return None
+        return self.offsets.offsets(values, commands, self.state)
+
+    def offset_basis(self, commands: np.ndarray) -> np.ndarray | None:
+        """phi (N, K) of the offset parameters at the commands in the bound state."""
+        return None if self.offsets is None else self.offsets.basis(commands, self.state)
 
     @property
     def n_parameters(self) -> int:
@@ -107,8 +126,11 @@ class CalibrationModel:
     def _gained(self, values: np.ndarray, commands: np.ndarray) -> np.ndarray:
         """The joint values (N, A) the commands ask through the gains (before compliances)."""
         if self.gains is None:
-            return np.asarray(commands, dtype=float)
-        return self.gains.joints(values, commands, self.joint_zeros(values))
+            joints = np.asarray(commands, dtype=float)
+        else:
+            joints = self.gains.joints(values, commands, self.joint_zeros(values))
+        shift = self.offsets_at(values, commands)
+        return joints if shift is None else joints + shift
 
     def _settle(
         self, values: np.ndarray, joints: np.ndarray, start: np.ndarray | None = None
@@ -151,9 +173,31 @@ class CalibrationModel:
                 else:
                     at = np.atleast_2d(np.asarray(qpos, dtype=float))[ok]
                 q[ok] += self.compliance.deflection(values, self.loads(values, at))
-        if self.gains is None:
-            return q
-        return self.gains.commands(values, q, self.joint_zeros(values))
+        return self._ungained(values, q)
+
+    def _ungained(self, values: np.ndarray, joints: np.ndarray) -> np.ndarray:
+        """The commands whose gained joint values plus offsets are ``joints`` (N, A): the
+        offsets of the commands found (a periodic one's shifts its own phase by v/period, a
+        few parts in a thousand: rounds of the fixed point until no command changes)."""
+        q = np.asarray(joints, dtype=float)
+
+        def ungain(j: np.ndarray) -> np.ndarray:
+            return (
+                j
+                if self.gains is None
+                else self.gains.commands(values, j, self.joint_zeros(values))
+            )
+
+        c = ungain(q)
+        if self.offsets is None:
+            return c
+        for _ in range(100):
+            new = ungain(q - self.offsets_at(values, c))
+            done = bool(np.all(np.abs(new - c)[np.isfinite(new)] <= 1e-15))
+            c = new
+            if done:
+                break
+        return c
 
     def commands_for_poses(self, values: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """:func:`twin.workspace.commands_for_poses` on the model with ``values`` (SI), the
@@ -198,7 +242,7 @@ class CalibrationModel:
             else:
                 sol = self._settle(values, q, start).solution
         self._warm = (key, sol.qpos)
-        return Prediction(targets=sol.targets, qpos=sol.qpos)
+        return Prediction(targets=sol.targets, qpos=sol.qpos, commands=commands)
 
     def _checked_joints(
         self, mech: Mechanism, values: np.ndarray, commands: np.ndarray
@@ -221,11 +265,13 @@ class CalibrationModel:
             return target_jacobian_batch(mech, self.params, values, prediction.qpos, self._plan)
         return ColumnJacobian(self, self._columns())(values, prediction)
 
-    def tool_twist_jacobian(self, values: np.ndarray, qpos: np.ndarray) -> np.ndarray:
+    def tool_twist_jacobian(
+        self, values: np.ndarray, qpos: np.ndarray, commands: np.ndarray | None = None
+    ) -> np.ndarray:
         """d(tool pose error twist)/d(values) (N, 6, n) at the closed configurations ``qpos``
         (N, nq) of the model at ``values``
         (twin.kinematics.sensitivity_batch.tool_twist_jacobian_batch
-        with the gains' and the compliances' columns)."""
+        with the gains' and the compliances' columns; the offsets' need the ``commands``)."""
         mech = self.mechanism(values)
         if self.params.is_geometry:
             return tool_twist_jacobian_batch(mech, self.params, values, qpos, self._plan)
@@ -235,7 +281,8 @@ class CalibrationModel:
         )
         qpos = np.atleast_2d(qpos)
         loads = self.loads(values, qpos) if plan.needs_loads else None
-        return plan.assemble(jac, values, qpos, self.joint_zeros(values), loads)
+        shifts = plan.offset_inputs(self, values, commands)
+        return plan.assemble(jac, values, qpos, self.joint_zeros(values), loads, shifts)
 
     def _columns(self) -> ColumnPlan:
         """The plan of every column (built once)."""
@@ -288,5 +335,6 @@ class ColumnJacobian:
             return jac[:, plan.source]
         rows = jac.reshape(len(qpos), -1, len(plan.params))
         loads = self.model.loads(values, qpos) if plan.needs_loads else None
-        out = plan.assemble(rows, values, qpos, self.model.joint_zeros(values), loads)
+        shifts = plan.offset_inputs(self.model, values, prediction.commands)
+        out = plan.assemble(rows, values, qpos, self.model.joint_zeros(values), loads, shifts)
         return out.reshape(-1, len(plan.source))

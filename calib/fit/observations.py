@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.data.dataset import Dataset, DatasetError
+from calib.fit.kinds import PoseState
 from calib.fit.model import CalibrationModel
 from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
@@ -30,6 +31,7 @@ class Observations:
     pose_ids: tuple[str, ...] | None = None
     target_names: tuple[str, ...] | None = None
     frame: str = "base"
+    state: PoseState | None = None  # directions, time, temperature (the offset kinds')
 
 
 def bind_dataset(mech: Mechanism, dataset: Dataset) -> Observations:
@@ -63,6 +65,7 @@ def bind_dataset(mech: Mechanism, dataset: Dataset) -> Observations:
         pose_ids=tuple(str(p) for p in ds.pose_ids.tolist()),
         target_names=tuple(ds.target_names),
         frame=ds.frame,
+        state=PoseState.of(ds),
     )
 
 

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from twin.offset_kinds import offset_range
+
 WEAK_FRACTION = 0.5  # weakly identified: std error above this fraction of the prior range
 # ... unless the value lies this many standard errors from zero (its sign and size are then
 # determined to a third or better, whatever the physical range says)
@@ -98,12 +100,22 @@ def physical_ranges(params: Any, spec: PriorSpec | None = None) -> np.ndarray:
     angle = DEFAULT_RANGE["angle"] if spec is None or spec.angle_deg is None else spec.angle_deg
     out = np.where(np.asarray(params.is_angle, dtype=bool), math.radians(angle), length * 1e-3)
     out = np.where(np.asarray(params.is_gain, dtype=bool), GAIN_RANGE_PPM * 1e-6, out)
+    out = _offset_ranges(params, out)
     if not getattr(params, "has_compliance", False):
         return out
     r = COMPLIANCE_RANGE
     comp = np.where(params.turns, r["turning"], r["sliding"])
     comp = np.where(np.isnan(params.payload_kg), comp * r["payload_kg"], comp)
     return np.where(params.is_compliance, comp, out)
+
+
+def _offset_ranges(params: Any, out: np.ndarray) -> np.ndarray:
+    """The offset kinds' ranges (twin.offset_kinds.offset_range) in ``out``."""
+    out = np.array(out, dtype=float)
+    for k in np.flatnonzero(getattr(params, "is_offset", ())):
+        p = params.parameters[k]
+        out[k] = offset_range(p.kind, bool(params.turns[k]), p.constants_dict)
+    return out
 
 
 def padded_rows(weights: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

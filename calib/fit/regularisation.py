@@ -27,6 +27,7 @@ user's ``--prior-std``), so that the output says what it costs or gains on held-
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -102,13 +103,20 @@ def choose_subspace(
     folds: int = FOLDS,
     cuts: tuple[float | None, ...] = CUTS,
     one_se: bool = True,
+    always: np.ndarray | None = None,
 ) -> SubspaceChoice:
     """The subspace to estimate in, from the plain least-squares fit's linearisation:
     ``residual`` (m,) there and ``jac`` (m, k + r) d residual / d (free parameters, then the
     registration's r); ``offsets`` (k,) the free parameters there minus their start values,
     ``ranges`` (k,) SI, ``pose_of_row`` (m,). The data's residual scale is the plain fit's.
     ``one_se=False`` drops the one-standard-error rule: for a plain fit that did not
-    converge, which is no answer for the rule to protect."""
+    converge, which is no answer for the rule to protect.
+    ``always`` (k,) bool: parameters estimated in full beside the subspace, as the
+    registration is (those without a known physical size to measure weakness in)."""
+    if always is not None and np.any(always):
+        return _with_always(
+            jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se
+        )
     m, k = len(residual), len(ranges)
     sigma = math.sqrt(float(residual @ residual) / max(m - jac.shape[1], 1))
     a = jac[:, :k] * ranges
@@ -200,6 +208,26 @@ def _clear_gain(per_pose: dict[float | None, np.ndarray], cut: float) -> bool:
         return False
     gain = float(np.mean(diff))
     return gain > float(np.std(diff, ddof=1)) / math.sqrt(diff.size)
+
+
+def _with_always(jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se):
+    """:func:`choose_subspace` with the ``always`` columns moved beside the registration's,
+    its basis carried back to every free parameter (those columns' rows the identity)."""
+    always = np.asarray(always, dtype=bool)
+    k = len(ranges)
+    rest = np.flatnonzero(~always)
+    cols = np.hstack([jac[:, rest], jac[:, :k][:, always], jac[:, k:]])
+    # linear in them, the always-estimated columns' start is irrelevant, as the registration's
+    inner = choose_subspace(
+        cols, residual, offsets[rest], ranges[rest], pose_of_row, folds, cuts, one_se=one_se
+    )
+    if inner.basis is None:
+        return inner
+    n_always = int(np.sum(always))
+    basis = np.zeros((k, inner.basis.shape[1] + n_always))
+    basis[rest, : inner.basis.shape[1]] = inner.basis
+    basis[np.flatnonzero(always), inner.basis.shape[1] :] = np.eye(n_always)
+    return dataclasses.replace(inner, basis=basis)
 
 
 @dataclass(frozen=True)

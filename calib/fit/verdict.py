@@ -223,7 +223,8 @@ def implausible_estimates(
 ) -> tuple[str, ...]:
     """Parameters whose estimate (in its display unit: "mm", "deg", "ppm", a compliance's;
     a bool is read as angle or not) exceeds the plausible size of its kind by more than three
-    of its standard errors (``display_std``, same units; None: by any amount)."""
+    of its standard errors (``display_std``, same units; None: by any amount); a unit without
+    a known size (an offset kind's rate or strain) is not judged."""
     limits = {"mm": PLAUSIBLE_MM, "deg": PLAUSIBLE_DEG, "ppm": PLAUSIBLE_PPM}
     limits.update(PLAUSIBLE_COMPLIANCE)
     out = []
@@ -231,7 +232,9 @@ def implausible_estimates(
     for name, v, s, unit in zip(names, display_values, std, units, strict=True):
         if isinstance(unit, (bool, np.bool_)):
             unit = "deg" if unit else "mm"
-        limit = limits[unit]
+        limit = limits.get(unit)
+        if limit is None:  # a rate or a strain of the offset kinds: no plausible size known
+            continue
         s = float(s) if math.isfinite(float(s)) else 0.0
         if not math.isfinite(float(v)) or abs(float(v)) - 3.0 * s > limit:
             out.append(f"{name} = {float(v):+.1f} +- {s:.1f} {unit}")

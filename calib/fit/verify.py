@@ -138,6 +138,7 @@ def verify(
     the one every command uses), or, without either, on these readings (said in ``note``)."""
     x0 = np.zeros(model.n_parameters)
     fresh = CalibrationModel(model.nominal, model.params)
+    fresh.bind_state(model.state)  # of these readings (the offset kinds read it)
     nominal = fresh.predict(x0, commands).targets
     after = fresh.predict(np.asarray(values, dtype=float), commands).targets
     if registration_after is None:

@@ -27,6 +27,7 @@ from calib.estimators.levenberg_marquardt import LMOptions
 from calib.exceptions import CalibError, TooManyOutliersError
 from calib.fit.fuller_model import FullerModel, fuller_or_not
 from calib.fit.identification import IdentificationResult, identify
+from calib.fit.kinds.state import state_for
 from calib.fit.model import CalibrationModel
 from calib.fit.observations import Observations, bind_dataset
 from calib.fit.position_error import stats_mm
@@ -89,14 +90,17 @@ def calibrate(
     unidentifiable: str = "fix",
     prior_spec: PriorSpec | None = None,
     regularise: bool = True,
+    start: np.ndarray | None = None,
 ) -> CalibrationRun:
-    """Identify from the rows of ``set_name`` (default: 'calibration' rows, else all).
+    """Identify from the rows of ``set_name`` (default: 'calibration' rows, else all),
+    from the values ``start`` (SI; default zero: the nominal model).
 
     Directions of the parameters the data determine worse than their physical range are kept
     at zero, the rest estimated, where cross-validation over poses says that predicts held-out
     readings as well as plain least squares (calib.fit.regularisation); ``prior_spec``
     (``--prior-std``) instead puts a zero-mean prior of those widths, weighed against the
     data's own residual scale; ``regularise=False`` is plain least squares."""
+    dataset = state_for(model, dataset)
     picked, selection = select_set(dataset, set_name, "calibration")
     used = set_name if set_name is not None else (CALIBRATION if picked is not dataset else None)
     obs = bind_dataset(model.nominal, picked)
@@ -108,9 +112,12 @@ def calibrate(
             hints,
             poor_data=True,
         )
+    model.bind_state(obs.state)  # the offset kinds read the readings' state
     accuracy = noise_rule(sigma_mm, picked)  # declared, else the repeats, else assumed
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
-    result, choice = (fit := _Fitter(obs, unidentifiable, options, prior_spec, regularise))(model)
+    starts = None if start is None else dict(zip(model.params.names, start, strict=True))
+    fit = _Fitter(obs, unidentifiable, options, prior_spec, regularise, starts)
+    result, choice = fit(model)
     # before readings are rejected as gross outliers: the error model's fuller variant
     model, result, choice, fuller = fuller_or_not(model, picked, obs, result, choice, fit)
     try:
@@ -154,19 +161,26 @@ class _Fitter:
     options: LMOptions | None
     prior_spec: PriorSpec | None
     regularise: bool
+    starts: dict[str, float] | None = None  # start values by name (a fuller model: 0 else)
 
     def __call__(self, model: CalibrationModel) -> tuple[IdentificationResult, PriorChoice | None]:
         obs, unidentifiable, options = self.obs, self.unidentifiable, self.options
+        start = None
+        if self.starts is not None:
+            start = np.array([self.starts.get(n, 0.0) for n in model.params.names])
+        if model.state is None:
+            model.bind_state(obs.state)
         if self.prior_spec is None:
-            return _identified(model, obs, unidentifiable, options, None, self.regularise), None
+            fitted = _identified(model, obs, unidentifiable, options, None, self.regularise, start)
+            return fitted, None
         # the user's widths, weighed against the residual the data show
         ranges = physical_ranges(model.params, self.prior_spec)
-        plain = _identified(model, obs, unidentifiable, options, None, False)
+        plain = _identified(model, obs, unidentifiable, options, None, False, start)
         free = plain.estimated
         choice = choose_prior(
             plain.fit_jacobian,
             plain.fit_residual,
-            plain.values[free],
+            plain.values[free] - (0.0 if start is None else start[free]),
             ranges[free],
             plain.fit_pose_of_row,
             plain.fit_jacobian.shape[1],
@@ -176,7 +190,7 @@ class _Fitter:
         # gains and compliances free: the prior is on the geometry
         widths = np.where(np.asarray(model.params.is_geometric, bool), ranges, np.inf)
         prior = Prior(widths, choice.noise_sigma_m)
-        return _identified(model, obs, unidentifiable, options, prior, False), choice
+        return _identified(model, obs, unidentifiable, options, prior, False, start), choice
 
 
 def _identified(
@@ -186,6 +200,7 @@ def _identified(
     options: LMOptions | None,
     prior: Prior | None,
     regularise: bool,
+    start: np.ndarray | None = None,
 ) -> IdentificationResult:
     """:func:`identify` (weak directions kept at zero if ``regularise``), its failures as
     FitFailed with the likely causes."""
@@ -193,6 +208,7 @@ def _identified(
         return identify(
             model,
             obs,
+            x0=start,
             unidentifiable=unidentifiable,
             options=options,
             prior=prior,
@@ -271,8 +287,9 @@ def verify_result(
     set_name: str | None,
 ) -> tuple[Verification, str]:
     """Score ``dataset`` (rows of ``set_name``, default all) before and after ``loaded``."""
-    picked, selection = select_set(dataset, set_name, "verification")
+    picked, selection = select_set(state_for(model, dataset), set_name, "verification")
     obs = bind_dataset(model.nominal, picked)
+    model.bind_state(obs.state)
     values = loaded.values_for(model.params)
     frame = loaded.data.get("frame", "base")
     if obs.frame != frame:

@@ -1,8 +1,8 @@
 """What a diagnosis names, as parameters of the error model: the loop closed in files.
 
 ``calib diagnose --out D.json`` writes, beside the named effect's fit, the error-model
-parameters that carry it where the effect is static (a function of the commanded pose
-alone, so that verify, the compensation and an exported model can use it):
+parameters that carry it (static kinds: a function of the commanded pose alone; and the
+offsets of calib.loop.offset_effects, which also read the state at each reading):
 
 * ``gain_error``        one ``actuator_gain`` per actuator (the joint travels (1 + g) times
                         its commanded travel from its zero)
@@ -20,10 +20,9 @@ alone, so that verify, the compensation and an exported model can use it):
 
 ``calib identify --with D.json`` adds them to the error model and refits geometry and effect
 together; the result file lists them (``added_parameters``), and :func:`model_for_result`
-rebuilds that model wherever the result is read. An effect that depends on time or on the
-direction of approach (thermal growth, drift, backlash) or on a periodic shape the diagnosis
-scanned (a lead of some pitch, an eccentricity) is no static kind yet: it is said so, and its
-before and after stay the diagnosis's own.
+rebuilds that model wherever the result is read. An effect of the tracker, or one that grows
+the whole structure (thermal_expansion of the diagnosis), is no kind of the error model: it is
+said so, and its before and after stay the diagnosis's own.
 """
 
 from __future__ import annotations
@@ -34,19 +33,25 @@ from typing import Any
 from calib.diagnosis.context import extra_parameters
 from calib.exceptions import CalibError
 from calib.fit.model import CalibrationModel
+from calib.loop.offset_effects import OFFSET_EFFECTS, offset_parameters
+from twin.offset_kinds import CONSTANTS
 from twin.parameters import Parameter, ParameterSet
 
-STATIC = ("gain_error", "reflector_offsets", "joint_axis_errors", "gravity_compliance")
-# why the others are no static kind of the error model (yet)
+# the effects the error model carries: the static kinds, then the offsets of the joint values
+# by the commands and the state at the reading (calib.loop.offset_effects)
+STATIC = (
+    "gain_error",
+    "reflector_offsets",
+    "joint_axis_errors",
+    "gravity_compliance",
+    *OFFSET_EFFECTS,
+)
+# why the others are no kind of the error model
 NOT_STATIC = {
-    "thermal_growth": "it changes with time since the machine was switched on",
-    "zero_drift": "it changes with time",
-    "thermal_expansion": "it changes with time",
+    "thermal_expansion": "it grows the whole structure about the base in time, no actuator's "
+    "offset (the error model's thermal_expansion kind is an actuator's, in temperature)",
     "tracker_drift": "it is the tracker's, in time, not the machine's",
     "tracker_scale": "it is the tracker's scale, not the machine's",
-    "backlash": "it depends on the direction from which each actuator approached the pose",
-    "lead_error": "it is periodic in the command at the pitch the diagnosis scanned",
-    "encoder_eccentricity": "it is periodic in the joint angle at the harmonic scanned",
 }
 
 
@@ -60,7 +65,11 @@ class EffectFileError(CalibError):
 
 
 def parameters_for(
-    model: CalibrationModel, effect: str, fitted: dict[str, Any] | None = None
+    model: CalibrationModel,
+    effect: str,
+    fitted: dict[str, Any] | None = None,
+    clock: str = "order",
+    origin: float = 0.0,
 ) -> list[Parameter]:
     """The error-model parameters that carry the static ``effect`` on this model (those it
     already holds left out); ``fitted``: the diagnosis's fit of the effect (its
@@ -68,6 +77,11 @@ def parameters_for(
     the compliance reads."""
     if effect == "gravity_compliance":
         return compliance_parameters(model, fitted)
+    if effect in OFFSET_EFFECTS:  # on the diagnosis's clock and time origin
+        mech = model.nominal
+        slide = tuple(bool(s) for s in mech.actuator_is_slide)
+        have = set(model.params.names)
+        return offset_parameters(effect, mech.actuator_names, slide, fitted, clock, origin, have)
     if effect == "gain_error":
         have = {(p.kind, p.element) for p in model.params.parameters if p.kind == "actuator_gain"}
         return [
@@ -115,14 +129,22 @@ def static_parts(chosen: str) -> tuple[list[str], list[str]]:
 
 
 def effect_content(
-    model: CalibrationModel, chosen: str, fitted: dict[str, dict] | None = None
+    model: CalibrationModel,
+    chosen: str,
+    fitted: dict[str, dict] | None = None,
+    time_unit: str = "pose",
+    time_origin: float = 0.0,
 ) -> dict[str, Any]:
     """The ``effect`` block of a diagnosis file: which parameters identify --with adds
-    (``fitted``: the diagnosis's ``effect_parameters``, by effect)."""
+    (``fitted``: the diagnosis's ``effect_parameters``, by effect; ``time_unit`` "s" or
+    "pose" and ``time_origin``: its time axis, the clock of the time kinds)."""
     static, other = static_parts(chosen)
     fits = fitted or {}
+    clock = "time_s" if time_unit == "s" else "order"
     adds = [
-        parameter_entry(p) for name in static for p in parameters_for(model, name, fits.get(name))
+        parameter_entry(p)
+        for name in static
+        for p in parameters_for(model, name, fits.get(name), clock, time_origin)
     ]
     return {
         "named": chosen,
@@ -144,6 +166,7 @@ def parameter_entry(p: Parameter) -> dict[str, Any]:
     }
     if p.payload_kg is not None:
         out["payload_kg"] = float(p.payload_kg)
+    out.update(p.constants_dict)  # an offset kind's period, phase, clock, ...
     return out
 
 
@@ -158,6 +181,7 @@ def _parameter(entry: Any, where: str) -> Parameter:
             str(entry["element"]),
             tuple(map(float, axis)),
             entry.get("payload_kg"),
+            {c: entry[c] for c in CONSTANTS if c in entry},
         )
     except (TypeError, ValueError) as exc:
         raise EffectFileError(f"{where}: {exc}") from None

@@ -4,7 +4,9 @@ An error-model file lists ``[[parameter]]`` tables (``name``, ``kind``, ``elemen
 a values file holds ``[values]`` by parameter name in millimetres and degrees (the units of
 files; an ``actuator_gain``, whose element is an actuator's name and which needs no axis, in
 ppm; a ``joint_compliance``, likewise an actuator's, in deg/(kN m) or mm/kN, with an optional
-``payload_kg``: twin.parameter_kinds), converted to SI here and nowhere else.
+``payload_kg``: twin.parameter_kinds; the offset kinds with their constants, ``phase``,
+``period_mm``, ``harmonic``, ``time_constant``, ``clock``, ``origin``: twin.offset_kinds),
+converted to SI here and nowhere else.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import mujoco
 import numpy as np
 
 from twin.exceptions import ParameterError
+from twin.offset_kinds import CONSTANTS
 from twin.parameters import KINDS, Parameter, ParameterSet
 
 _BOMS = (  # longest first: the UTF-32 marks begin with the UTF-16 ones
@@ -26,7 +29,7 @@ _BOMS = (  # longest first: the UTF-32 marks begin with the UTF-16 ones
     (b"\xfe\xff", "UTF-16 (big-endian)"),
     (b"\xff\xfe", "UTF-16 (little-endian)"),
 )
-ENTRY_FIELDS = ("name", "kind", "element", "axis", "payload_kg")
+ENTRY_FIELDS = ("name", "kind", "element", "axis", "payload_kg", *CONSTANTS)
 REQUIRED_FIELDS = ("name", "kind", "element")
 TOP_LEVEL_KEYS = ("model", "parameter")
 _UTF8 = "UTF-8 is expected (save or export the file as UTF-8)"
@@ -155,7 +158,8 @@ def _entry(path: Path, k: int, e: object) -> Parameter:
         )
     axis = _axis_field(where, e)
     try:
-        return Parameter(name, kind, element, axis, e.get("payload_kg"))
+        consts = {c: e[c] for c in CONSTANTS if c in e}
+        return Parameter(name, kind, element, axis, e.get("payload_kg"), consts)
     except ParameterError as exc:
         raise ParameterError(f"{path}: parameter #{k + 1}: {exc}") from None
 
