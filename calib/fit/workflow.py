@@ -104,6 +104,7 @@ def calibrate(
     picked, selection = select_set(dataset, set_name, "calibration")
     used = set_name if set_name is not None else (CALIBRATION if picked is not dataset else None)
     obs = bind_dataset(model.nominal, picked)
+    model.bind_state(obs.state)  # the offset kinds read the readings' state
     hints = _hints(model, obs)
     if hints:  # on the readings against the nominal model: its words never follow a fit's path
         raise FitFailed(
@@ -112,7 +113,6 @@ def calibrate(
             hints,
             poor_data=True,
         )
-    model.bind_state(obs.state)  # the offset kinds read the readings' state
     accuracy = noise_rule(sigma_mm, picked)  # declared, else the repeats, else assumed
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
     starts = None if start is None else dict(zip(model.params.names, start, strict=True))
