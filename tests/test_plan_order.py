@@ -70,7 +70,11 @@ def test_exchange_reaches_a_d_optimum_no_single_swap_improves():
 
 def test_cover_takes_the_centre_then_the_farthest():
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [-1.5, 0.0], [0.1, 0.0], [0.0, 3.0]])
-    assert cover(pts, 3, exclude=[3]) == [0, 2, 4]  # centroid (-0.125, 0.75): nearest (0, 0); then (0, 3); then (-1.5, 0)
+    assert cover(pts, 3, exclude=[3]) == [
+        0,
+        2,
+        4,
+    ]  # centroid (-0.125, 0.75): nearest (0, 0); then (0, 3); then (-1.5, 0)
 
 
 def test_program_file_reads_back_as_candidates_with_the_same_commands(tmp_path):
@@ -114,3 +118,14 @@ def test_workspace_candidates_of_a_serial_arm_lie_within_the_ranges():
     c = workspace_candidates(mech, 200, np.random.default_rng(0))
     lo, hi = mech.actuator_range.T
     assert np.all((c.commands >= lo) & (c.commands <= hi))
+
+
+def test_paper_criterion_reports_the_condition_number_of_its_choice():
+    rng = np.random.default_rng(5)
+    blocks = rng.normal(size=(60, 3, 5))
+    chosen, value = choose(blocks, 8, "paper", rng)
+    assert len(set(chosen)) == 8
+    assert value == pytest.approx(observability(np.vstack(blocks[chosen]), "condition"))
+    # the greedy's choice is better conditioned than a random set of the same size
+    other = np.random.default_rng(6).choice(60, 8, replace=False)
+    assert value < observability(np.vstack(blocks[other]), "condition")
