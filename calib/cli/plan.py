@@ -155,6 +155,14 @@ def _n_test(args: argparse.Namespace) -> int:
     return args.n_test
 
 
+def _default_counts(n: int, plan) -> list[int]:
+    """N/3, 2N/3 and N, none below 1.5 times the fewest poses that give as many equations
+    as the directions to identify (below that the outlier check has too few spare rows)."""
+    rows, rank = plan.blocks.shape[1:]
+    least = min(n, math.ceil(1.5 * rank / rows))
+    return sorted({max(least, n // 3), max(least, 2 * n // 3), n})
+
+
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if args.candidates and out.exists() and out.resolve() == Path(args.candidates).resolve():
@@ -210,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
     }
     files: dict = {out: program_text(mech, plan)}
     if args.predict:
-        counts = args.predict_n or sorted({max(1, args.n // 3), max(1, 2 * args.n // 3), args.n})
+        counts = args.predict_n or _default_counts(args.n, plan)
         curve = accuracy_curve(
             model, plan, counts, args.sigma_mm * 1e-3, args.draws, args.seed, args.truth_scale
         )
@@ -223,14 +231,17 @@ def run(args: argparse.Namespace) -> int:
         }
         print(
             f"predicted held-out 3D error ({args.draws} truths within {args.truth_scale:g}x the "
-            f"physical ranges, noise {args.sigma_mm:g} mm; mean +- std over the draws):"
+            f"physical ranges, noise {args.sigma_mm:g} mm; readings against the identified "
+            "model as verify scores them, mean +- std over the draws; beside, the model's own "
+            "error against the drawn truth):"
         )
         for r in rows:
             print(
                 f"  N={r['n']:4d} {r['kind']:6s}: median {r['median_mm']:.4f} +- "
                 f"{r['median_std_mm']:.4f} mm, 90th pct {r['p90_mm']:.4f} +- "
-                f"{r['p90_std_mm']:.4f} mm"
-                + (f", {r['failed']} fit(s) failed" if r["failed"] else "")
+                f"{r['p90_std_mm']:.4f} mm (the model's own: median {r['model_median_mm']:.4f}, "
+                f"90th pct {r['model_p90_mm']:.4f} mm)"
+                + (f"; {r['failed']} fit(s) failed" if r["failed"] else "")
             )
         title = f"{mech.name}: predicted held-out error, {args.draws} drawn truths"
         files[out.with_suffix(".png")] = lambda tmp: save_curve_png(curve, tmp, title)
