@@ -160,3 +160,16 @@ def test_polisher_program_sees_every_reflector_and_refused_poses_do_not():
     low = Rules(tracker_m=np.array([0.0, 0.0, -1.0]), acceptance_deg=30.0)
     with pytest.raises(IdentifiabilityError, match="0 of 300 candidate poses feasible"):
         make_plan(model, cands, low, 25, 8)
+
+
+def test_floor_option_refuses_what_the_models_own_floor_refuses(tmp_path):
+    plain = Mechanism.from_xml("models/arm6r.xml")
+    floored = Mechanism.from_xml(_arm_on_floor(tmp_path))
+    cands = workspace_candidates(plain, 300, np.random.default_rng(1))
+    by_option = check_poses(plain, cands.commands, Rules(floor_z_m=FLOOR_Z))
+    by_plane = check_poses(floored, cands.commands, Rules())
+    assert by_option.floor_z_m == by_plane.floor_z_m == pytest.approx(FLOOR_Z)
+    assert np.array_equal(by_option.ok, by_plane.ok)
+    assert any(r and "below the floor" in r for r in by_option.reasons)
+    no_floor = check_poses(plain, cands.commands, Rules())
+    assert no_floor.ok.sum() > by_option.ok.sum()
