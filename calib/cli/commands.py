@@ -12,6 +12,8 @@
                              --out commands.csv [--frame base|tracker] [--force]
     python -m calib export   --model M.xml --errors E.toml --result R.json
                              --out M_calibrated.xml [--dh-out T.csv]
+    python -m calib plan     --model M.xml --errors E.toml --n N --out program.csv
+                             [--candidates FILE] [--tracker-at X,Y,Z] [--predict]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
@@ -47,6 +49,7 @@ from pathlib import Path
 
 import calib.cli.compensate as cmd_compensate
 import calib.cli.export as cmd_export
+import calib.cli.plan as cmd_plan
 from calib.cli.common import (
     identify_exit_code,
     positive_int,
@@ -310,13 +313,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--test-set",
         help="hold out the rows of this set (of --test FILE, or of --data) as the test set",
     )
-    for command in (cmd_compensate, cmd_export):  # each subcommand in its own module
+    for command in (cmd_compensate, cmd_export, cmd_plan):  # each subcommand in its own module
         command.add_parser(sub)
     return parser
 
 
 COMMANDS = {"identify": cmd_identify, "verify": cmd_verify, "diagnose": cmd_diagnose}
-COMMANDS.update({"compensate": cmd_compensate.run, "export": cmd_export.run})
+COMMANDS.update({"compensate": cmd_compensate.run, "export": cmd_export.run, "plan": cmd_plan.run})
 # the files each command writes beside --out (same name, another suffix)
 WRITTEN_BESIDE = {
     "identify": (),
@@ -324,6 +327,7 @@ WRITTEN_BESIDE = {
     "diagnose": (".png",),
     "compensate": (".json",),
     "export": (),
+    "plan": (".json", ".png"),
 }
 
 
