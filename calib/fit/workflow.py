@@ -108,9 +108,9 @@ def calibrate(
     hints = _hints(model, obs)
     if hints:  # on the readings against the nominal model: its words never follow a fit's path
         raise FitFailed(
-            "the data look wrong (found on the readings against the nominal model, before "
-            "any fit), so a fit of them is not usable; fix the data first",
-            hints,
+            f"{hints[0]} (found on the readings against the nominal model, before any fit: a "
+            "fit of them is not usable); fix the data first",
+            hints[1:],
             poor_data=True,
         )
     accuracy = noise_rule(sigma_mm, picked)  # declared, else the repeats, else assumed

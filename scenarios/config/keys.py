@@ -254,6 +254,7 @@ SCHEMAS: dict[str, Table] = {
                 "desired_poses": _COUNT,
                 "joint_fraction": Key(float, required=True, above=0, max=1),
                 "stroke_margin_deg": Key(float, required=True, min=0),
+                "program_targets": Key(int, min=1, max=MAX_COUNT),
             },
             required=True,
         ),
@@ -281,6 +282,12 @@ SCHEMAS: dict[str, Table] = {
         ),
         tracker=_ARM_TRACKER,
         plan=_ARM_PLAN,
+        compensation=Table(
+            {
+                "program_targets": _COUNT,
+                "joint_fraction": Key(float, required=True, above=0, max=1),
+            }
+        ),
     ),
     "undeclared_effect": _base(
         seed=_SEED,

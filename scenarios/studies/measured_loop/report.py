@@ -52,6 +52,42 @@ def _refit_sentence(w: dict[str, Any]) -> str:
     )
 
 
+def _to_the_machine(s: dict[str, Any]) -> list[str]:
+    """The program compensated through the result with its effect, and the exported model."""
+    lines = []
+    p = s.get("program")
+    if p:
+        b, a = p["before"], p["after"]
+        joint, change = max(p["max_joint_change"].items(), key=lambda kv: kv[1])
+        m = p["after_mean_in_tool_frame_mm"]
+        lines += [
+            f"**To the machine.** `calib compensate --commands` corrected a program of "
+            f"{p['n_targets']} joint targets through the result with its effect (exit code "
+            f"{p['exit_code']}, {p['n_written']} written); the twin, compliance and all, moved "
+            f"to them: the true tool point's error against the nominal intent (tracker frame) "
+            f"went from {b['rms_mm']:.3f} / {b['max_mm']:.3f} mm (RMS / max) at the program's "
+            f"commands to {a['rms_mm']:.4f} / {a['max_mm']:.4f} mm at the corrected ones, of "
+            f"which ({m[0]:+.4f}, {m[1]:+.4f}, {m[2]:+.4f}) mm is one offset in the tool's "
+            f"frame (the tool point no reflector sees) and {p['after_spread_about_it_mm']:.4f} "
+            f"mm RMS the spread about it; the largest joint change was {joint} "
+            f"{change:.3f} deg.",
+            "",
+        ]
+    e = s.get("export")
+    if e:
+        lacks = e.get("model_lacks")
+        t = e["verify_as_is_test"]
+        rms = "-" if t.get("rms_mm") is None else f"{t['rms_mm']:.4f}"
+        lines += [
+            f"`calib export` wrote the calibrated MJCF (exit code {e['exit_codes']['export']}); "
+            f"`calib verify --model` of it as it is scores the test set at {rms} mm RMS (exit "
+            f"code {e['exit_codes']['verify_as_is']}), "
+            + (f"and says first: {lacks}" if lacks else "and the file holds every parameter."),
+            "",
+        ]
+    return lines
+
+
 def report(s: dict[str, Any]) -> str:
     v = s["verdict"]
     codes = ", ".join(f"{k} {c}" for k, c in s["exit_codes"].items())
@@ -88,6 +124,7 @@ def report(s: dict[str, Any]) -> str:
     ]
     if "with_effect" in s:
         lines += [_refit_sentence(s["with_effect"]), ""]
+    lines += _to_the_machine(s)
     lines += [
         f"Run time {s['runtime_s']:.1f} s.",
         "",

@@ -29,6 +29,7 @@ from scenarios.config import Scenario
 from scenarios.machine_setup import build_effects
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
+from scenarios.studies.serial_arm.program import compensate_program
 from scenarios.studies.serial_arm.study import _cli, _tracker, drawn_arm
 from scenarios.twin_datasets import tracker_frame_dataset
 
@@ -38,6 +39,40 @@ def _verified(common: list[str], result: Path, out: Path, log: Path) -> tuple[in
         ["verify", *common, "--result", str(result), "--set", "test", "--out", str(out)], log
     )
     return code, json.loads(out.read_text()) if out.is_file() else {}
+
+
+def _to_the_machine(scenario, common, result, arm, effects, out_dir) -> dict[str, Any]:
+    """The result with its effect taken to the machine: a program compensated through it and
+    re-measured on the twin, and the exported model (with what it cannot hold beside it)
+    scored as it is on the test set."""
+    n = scenario.get("compensation.program_targets", int, None)
+    out: dict[str, Any] = {}
+    if n:
+        model_path, errors_path, data = (Path(common[i]) for i in (1, 3, 5))
+        out["program"] = compensate_program(
+            "with_effect", model_path, errors_path, data, result, arm.truth,
+            _tracker(scenario), effects, out_dir, _cli, n,
+            scenario.get("compensation.joint_fraction", float),
+            np.random.default_rng([scenario.get("seed", int), 31]),
+        )  # fmt: skip
+    exported = out_dir / "calibrated.xml"
+    code_exp = _cli(
+        ["export", *common[:4], "--result", str(result), "--out", str(exported)],
+        out_dir / "export.log",
+    )
+    as_is_json = out_dir / "calibrated_verify.json"
+    code_ver = _cli(
+        ["verify", "--model", str(exported), *common[4:], "--set", "test", "--out",
+         str(as_is_json)],
+        out_dir / "calibrated_verify.log",
+    )  # fmt: skip
+    scored = json.loads(as_is_json.read_text()) if as_is_json.is_file() else {}
+    out["export"] = {
+        "exit_codes": {"export": code_exp, "verify_as_is": code_ver},
+        "model_lacks": scored.get("model_lacks"),
+        "verify_as_is_test": {k: scored.get("as_is", {}).get(k) for k in ("n", "rms_mm", "max_mm")},
+    }
+    return out
 
 
 def run(
@@ -128,6 +163,8 @@ def run(
                 n: refit["parameters"][n] for n in added if n in refit.get("parameters", {})
             },
         }
+        if with_result.is_file():
+            summary.update(_to_the_machine(scenario, common, with_result, arm, effects, out_dir))
     summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report("measured_loop", summary)
     figures = {  # the commands' own figures, as a user gets them beside their files

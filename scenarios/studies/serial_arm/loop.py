@@ -5,6 +5,8 @@
     python -m calib export     --model M --errors E --result R.json --out M_calibrated.xml
                                --dh-out M_calibrated.mdh.csv
     python -m calib verify     --model M_calibrated.xml --data D --set test --out V.json
+    python -m calib compensate --model M --errors E --result R.json
+                               --commands program.csv --out corrected.csv
 
 The desired tool positions are spread over the arm's workspace (the tool points of joint
 commands drawn over a fraction of each range, kept where the nominal arm reaches them at its
@@ -31,6 +33,7 @@ from calib.compensate import kinematics_difference, solve_each
 from calib.data import read_dataset, select_set
 from calib.fit import bind_dataset, initial_registration, stats_mm
 from scenarios.config import Scenario
+from scenarios.studies.serial_arm.program import compensate_program
 from twin.formats import build_xml, exact, read_dh_table
 from twin.kinematics import forward, forward_batch
 from twin.mechanism import Mechanism
@@ -196,4 +199,11 @@ def close_the_loop(
         "dh_table_max_fk_diff_mm": dh_check.max_position_m * 1e3,
         "verify_as_is_test": {k: as_is[k] for k in ("n", "rms_mm", "mean_mm", "max_mm")},
     }
-    return {"compensation": compensation, "export": export}
+    program = None
+    n_program = scenario.get("compensation.program_targets", int, None)
+    if n_program:  # the robot's program, through compensate --commands (its own draws)
+        program = compensate_program(
+            name, model_path, errors_path, data, result_json, truth, tracker, (), out_dir, cli,
+            n_program, fraction, np.random.default_rng([scenario.get("seed", int), 31]),
+        )  # fmt: skip
+    return {"compensation": compensation, "export": export, "program": program}
