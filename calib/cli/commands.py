@@ -4,7 +4,8 @@
                              [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
                              [--with D.json]
     python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
-                             [--set test] [--out V.json]
+                             [--set test] [--register | --register-set NAME]
+                             [--out V.json]
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
                              [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
     python -m calib compensate --model M.xml --errors E.toml --result R.json
@@ -29,7 +30,9 @@ Exit codes (calib.fit.verdict): 0 success (a residual above the tracker noise is
 refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
 do not fit the model (a likely data error named, too many outliers, implausible estimates
 the data determine well, an implausible residual, or a residual above an explicit
-``--max-ratio``); verify of a result identify refused exits with identify's code; 5 some
+``--max-ratio``; verify: readings that the result's registration leaves an order of magnitude
+beyond its residual, likely another tracker station, without ``--register``); verify of a
+result identify refused exits with identify's code; 5 some
 desired poses out of reach (compensate); 130 interrupted.
 """
 
@@ -44,6 +47,7 @@ from pathlib import Path
 
 import calib.cli.compensate as cmd_compensate
 import calib.cli.export as cmd_export
+import calib.cli.verify_day as verify_day
 from calib.cli.common import (
     positive_int,
     print_verdict,
@@ -64,7 +68,6 @@ from calib.fit import (
     regularisation_text,
     rejected_rows,
     result_content,
-    verify_result,
 )
 from calib.loop import model_for_result, parameter_entry
 from common.atomic_files import json_text
@@ -153,6 +156,11 @@ def _refused(loaded) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
+    if args.result is None and (args.register or args.register_set):
+        raise CalibError(
+            "--register and --register-set re-register a result (--result R.json); a model "
+            "scored as it is is registered on the 'calibration' rows, else on the scored ones"
+        )
     if args.result is None:  # the model as it is, e.g. one written by export
         import calib.cli.verify_as_is as verify_as_is
 
@@ -171,7 +179,10 @@ def cmd_verify(args: argparse.Namespace) -> int:
             "scores below are of a fit the data did not support",
             file=sys.stderr,
         )
-    v, selection = verify_result(model, loaded, dataset, args.set)
+    chosen = verify_day.verification(model, loaded, dataset, args)
+    if isinstance(chosen, int):
+        return chosen
+    v, selection = chosen
     print(selection)
     print(v.note)
     for side in ("before", "after"):
@@ -279,6 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(e.g. one written by export), a tracker frame registered on the calibration rows",
     )
     ver.add_argument("--set", help="score the rows of this set (default: all rows)")
+    verify_day.add_options(ver)
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
     )

@@ -49,6 +49,12 @@ __all__, __getattr__, __dir__ = face(
             "Verification",
             "score_side",
         ),
+        "verify_register": (
+            "STATION_RATIO",
+            "StationCheck",
+            "station_check",
+            "verify_registered",
+        ),
         "workflow": (
             "CalibrationRun",
             "FitFailed",

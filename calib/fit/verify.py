@@ -57,6 +57,9 @@ class Verification:
     before: Side
     after: Side
     note: str
+    # the base-from-tracker frames each side was scored in (None: readings in the base frame)
+    registration_before: Registration | None = None
+    registration_after: Registration | None = None
 
     @property
     def n_poses(self) -> int:
@@ -153,4 +156,6 @@ def verify(
         before=_side(model, before_base, nominal),
         after=_side(model, after_base, after),
         note=note,
+        registration_before=None if registration_after is None else reg0,
+        registration_after=registration_after,
     )
