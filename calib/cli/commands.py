@@ -5,7 +5,7 @@
                              [--with D.json]
     python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
                              [--set test] [--register | --register-set NAME]
-                             [--out V.json]
+                             [--iso9283] [--out V.json]
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
                              [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
     python -m calib compensate --model M.xml --errors E.toml --result R.json
@@ -48,6 +48,7 @@ from pathlib import Path
 import calib.cli.compensate as cmd_compensate
 import calib.cli.export as cmd_export
 import calib.cli.verify_day as verify_day
+import calib.cli.verify_iso as verify_iso
 from calib.cli.common import (
     positive_int,
     print_verdict,
@@ -156,10 +157,11 @@ def _refused(loaded) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    if args.result is None and (args.register or args.register_set):
+    if args.result is None and (args.register or args.register_set or args.iso9283):
         raise CalibError(
-            "--register and --register-set re-register a result (--result R.json); a model "
-            "scored as it is is registered on the 'calibration' rows, else on the scored ones"
+            "--register, --register-set and --iso9283 score a result (--result R.json); a "
+            "model scored as it is is registered on the 'calibration' rows, else on the "
+            "scored ones"
         )
     if args.result is None:  # the model as it is, e.g. one written by export
         import calib.cli.verify_as_is as verify_as_is
@@ -187,6 +189,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
     print(v.note)
     for side in ("before", "after"):
         print(getattr(v, side).line(f"{side:6s}"))
+    if args.iso9283:  # the ISO report is what --out then writes
+        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
+        values = loaded.values_for(model.params)
+        verify_iso.run(model, values, dataset, v, args.out, {**content, "selection": selection})
+        return refused
     if args.out:
         from calib.cli.verify_figure import save_verification_png
 

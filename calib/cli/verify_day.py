@@ -41,6 +41,13 @@ def add_options(ver: argparse.ArgumentParser) -> None:
         help="as --register, the registration fitted on the rows of set NAME; the other rows "
         "(of --set, if given) are scored",
     )
+    ver.add_argument(
+        "--iso9283",
+        action="store_true",
+        help="ISO 9283 pose accuracy AP and repeatability RP per commanded pose, before and "
+        "after, from repeated readings (the 'repeat' column, or poses with identical "
+        "commands); --out then writes the report (JSON, CSV per pose, PNG)",
+    )
 
 
 def _registered(
