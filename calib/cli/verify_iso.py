@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.analysis.iso9283 import (
+from calib.analysis import (
     ORIENTATION_KEYS,
     POSITION_KEYS,
     STANDARD,
