@@ -53,4 +53,5 @@ def subset(dataset: Dataset, mask: np.ndarray) -> Dataset:
         order=cut(dataset.order),
         time_s=cut(dataset.time_s),
         commanded_poses=cut(dataset.commanded_poses),
+        orientations=cut(dataset.orientations),
     )

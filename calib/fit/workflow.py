@@ -36,6 +36,7 @@ from calib.fit.prior import (
     physical_ranges,
     weakly_identified,
 )
+from calib.fit.probe_rows import orientation_weight
 from calib.fit.regularisation import PriorChoice, choose_prior, cut_label
 from calib.fit.verdict import (
     DEFAULT_MAX_RATIO,
@@ -99,6 +100,9 @@ def calibrate(
     used = set_name if set_name is not None else (CALIBRATION if picked is not dataset else None)
     obs = bind_dataset(model.nominal, picked)
     accuracy = declared_accuracy(sigma_mm, picked.tracker)
+    if obs.rotations is not None:  # 6-DoF probes: their rows weighed by the two accuracies
+        weight = orientation_weight(accuracy.sigma_mm, picked.tracker)
+        obs = replace(obs, orientation_weight_m=weight)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
     ranges = physical_ranges(model.params, prior_spec)
     choice = None
@@ -239,7 +243,10 @@ def judge(
 
 def rejected_rows(run: CalibrationRun) -> list[dict[str, Any]]:
     """The rejected readings by the dataset's pose_id and target name, residual in mm."""
-    names = run.model.nominal.target_names
+    names = list(run.model.nominal.target_names)
+    if run.obs.rotations is not None:  # a probe's orientation is a reading of its own
+        oriented = np.isfinite(run.obs.rotations).all(axis=(0, 2, 3))
+        names += [f"{n} (orientation)" for n, o in zip(names, oriented, strict=True) if o]
     return [
         {
             "pose_id": int(run.dataset.pose_ids[r.pose_index]),
