@@ -66,6 +66,7 @@ from calib.fit import (
     EXIT_OK,
     CalibrationRun,
     model_from_files,
+    probe_summary,
     regularisation_text,
     rejected_rows,
     result_content,
@@ -88,6 +89,8 @@ def _print_run(run: CalibrationRun) -> None:
         f"{r['rms_mm']:.4f} mm, mean {r['mean_mm']:.4f} mm, max {r['max_mm']:.4f} mm; "
         f"{res.iterations} iterations, converged: {res.converged}"
     )
+    if run.obs.rotations is not None:
+        print(probe_summary(run))
     rows = rejected_rows(run)
     if rows:
         print(f"{len(rows)} reading(s) rejected as gross outliers:")

@@ -59,7 +59,9 @@ def _registered(
     if name is None:
         picked, selection = select_set(dataset, args.set, "verification")
         obs = bind_dataset(model.nominal, picked)
-        v = verify_registered(model, values, obs.commands, obs.measured, picked.pose_ids)
+        v = verify_registered(
+            model, values, obs.commands, obs.measured, picked.pose_ids, rotations=obs.rotations
+        )
         return v, selection
     if name not in set(sets):
         raise DatasetError(
@@ -77,7 +79,14 @@ def _registered(
     obs = bind_dataset(model.nominal, picked)
     fit = np.array([str(s) == name for s in picked.sets])
     v = verify_registered(
-        model, values, obs.commands, obs.measured, picked.pose_ids, fit_rows=fit, fit_name=name
+        model,
+        values,
+        obs.commands,
+        obs.measured,
+        picked.pose_ids,
+        fit_rows=fit,
+        fit_name=name,
+        rotations=obs.rotations,
     )
     selection = (
         f"{v.n_poses} of {dataset.n_poses} poses scored, registered on the "

@@ -59,6 +59,7 @@ __all__, __getattr__, __dir__ = face(
             "CalibrationRun",
             "FitFailed",
             "calibrate",
+            "probe_summary",
             "regularisation_text",
             "rejected_rows",
             "result_content",

@@ -128,3 +128,18 @@ def interleave(position: np.ndarray, orientation: np.ndarray, n_poses: int) -> n
     return np.concatenate(
         [position.reshape(n_poses, -1, c), orientation.reshape(n_poses, -1, c)], axis=1
     ).reshape(-1, c)
+
+
+def probe_line(obs, sigma_mm: float, sigma_deg: float, values_deg: np.ndarray | None) -> str:
+    """What identify says of the probes' rows, from their numbers: how many, their weight,
+    and the orientation residual per pose (``values_deg``, RMS over the probes)."""
+    oriented = np.isfinite(obs.rotations).all(axis=(0, 2, 3))
+    names = [n for n, o in zip(obs.target_names or (), oriented, strict=False) if o]
+    text = (
+        f"6-DoF readings of {', '.join(names) or f'{int(oriented.sum())} target(s)'}: "
+        f"orientation rows beside the positions, weighed {sigma_mm:g} mm / {sigma_deg:g} deg "
+        f"= {obs.orientation_weight_m * 1e3:.2f} mm per rad"
+    )
+    if values_deg is not None:
+        text += f"; orientation residual RMS {np.sqrt(np.mean(values_deg**2)):.4f} deg"
+    return text

@@ -23,7 +23,7 @@ import numpy as np
 from calib.fit.model import CalibrationModel
 from calib.fit.position_error import error_norms, stats_mm
 from calib.fit.registration import Registration, initial_registration
-from calib.fit.verify import Verification, score_side
+from calib.fit.verify import Verification, orientation_source, probe_deg, score_side
 
 STATION_RATIO = 10.0  # "an order of magnitude" beyond the result's residual
 # below a micrometre a residual says nothing of the station (a tracker's resolution); a
@@ -39,13 +39,15 @@ def verify_registered(
     pose_ids: np.ndarray,
     fit_rows: np.ndarray | None = None,
     fit_name: str | None = None,
+    rotations: np.ndarray | None = None,
 ) -> Verification:
     """Before and after errors of ``measured`` (P, T, 3), each side in its own rigid
     registration fitted to its own predictions on the poses ``fit_rows`` (bool (P,); None:
     all of them). The poses scored are those not in ``fit_rows`` (all when it is None)."""
     fresh = CalibrationModel(model.nominal, model.params)
-    nominal = fresh.predict(np.zeros(model.n_parameters), commands).targets
-    after = fresh.predict(np.asarray(values, dtype=float), commands).targets
+    x0, values = np.zeros(model.n_parameters), np.asarray(values, dtype=float)
+    pred0, pred1 = fresh.predict(x0, commands), fresh.predict(values, commands)
+    nominal, after = pred0.targets, pred1.targets
     n = len(commands)
     fit = np.ones(n, dtype=bool) if fit_rows is None else np.asarray(fit_rows, dtype=bool)
     scored = np.ones(n, dtype=bool) if fit_rows is None else ~fit
@@ -59,14 +61,20 @@ def verify_registered(
         "registered afresh (--register): only the rigid registration of these readings was "
         f"fitted (6 DoF, no machine parameter), for each side on its own, on {where}"
     )
+    rot = None if rotations is None else rotations[scored]
+    ori0 = probe_deg(fresh, x0, pred0.qpos[scored], rot, reg_before)
+    ori1 = probe_deg(fresh, values, pred1.qpos[scored], rot, reg_after)
     return Verification(
         pose_ids=np.asarray(pose_ids)[scored],
         target_names=model.nominal.target_names,
-        before=score_side(model.nominal, reg_before.to_base(measured[scored]), nominal[scored]),
-        after=score_side(model.nominal, reg_after.to_base(measured[scored]), after[scored]),
+        before=score_side(
+            model.nominal, reg_before.to_base(measured[scored]), nominal[scored], ori0
+        ),
+        after=score_side(model.nominal, reg_after.to_base(measured[scored]), after[scored], ori1),
         note=note,
         registration_before=reg_before,
         registration_after=reg_after,
+        orientation_source=orientation_source(ori0, measured),
     )
 
 

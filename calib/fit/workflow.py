@@ -36,7 +36,7 @@ from calib.fit.prior import (
     physical_ranges,
     weakly_identified,
 )
-from calib.fit.probe_rows import orientation_weight
+from calib.fit.probe_rows import orientation_weight, probe_line
 from calib.fit.regularisation import PriorChoice, choose_prior, cut_label
 from calib.fit.verdict import (
     DEFAULT_MAX_RATIO,
@@ -47,7 +47,7 @@ from calib.fit.verdict import (
     judge_fit,
 )
 from calib.fit.verdict_notes import with_notes
-from calib.fit.verify import Verification, verify
+from calib.fit.verify import Verification, probe_deg, verify
 from twin.exceptions import TwinError
 
 
@@ -205,7 +205,8 @@ def judge(
     norms = np.linalg.norm(measured - pred.targets, axis=-1)
     keep = np.ones(norms.shape, dtype=bool)
     for r in result.rejected:
-        keep[r.pose_index, r.target_index] = False
+        if r.target_index < keep.shape[1]:  # beyond: a probe's orientation (its point kept)
+            keep[r.pose_index, r.target_index] = False
     stats = stats_mm(norms[keep])
     message = result.convergence_message or (
         f"stopped after {result.iterations} iterations without the step or the cost change "
@@ -239,6 +240,15 @@ def judge(
         structure=describe(structure),
     )
     return with_notes(verdict, result, *obs.measured.shape[:2]), stats.as_dict(), structure
+
+
+def probe_summary(run: CalibrationRun) -> str:
+    """The line identify prints of 6-DoF readings (calib.fit.probe_rows.probe_line)."""
+    res, obs = run.result, run.obs
+    pred = run.model.predict(res.values, obs.commands)
+    deg = probe_deg(run.model, res.values, pred.qpos, obs.rotations, res.registration)
+    sigma_deg = float((run.dataset.tracker or {})["sigma_deg"])
+    return probe_line(obs, run.verdict.accuracy.sigma_mm, sigma_deg, deg)
 
 
 def rejected_rows(run: CalibrationRun) -> list[dict[str, Any]]:
@@ -415,6 +425,7 @@ def verify_result(
             picked.pose_ids,
             registration_after=loaded.registration,
             calibration_set=calibration,
+            rotations=obs.rotations,
         )
     except TwinError as exc:  # e.g. no closure at the result's values: name the odd ones
         raise unusable_values(loaded, model.params, exc) from None
