@@ -76,6 +76,10 @@ class Verification:
             "metric": "3D position error per reading |p_measured - p_model| (mm)",
             "before": self.before.as_dict(),
             "after": self.after.as_dict(),
+            "orientation_from": {
+                "probe": "the 6-DoF probes' frames (RMS over the probes per pose)",
+                "pattern": "the rigid fit of the model's target pattern onto the readings",
+            }.get(self.orientation_source),
             "note": self.note,
         }
 
