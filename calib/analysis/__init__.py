@@ -1,5 +1,6 @@
 """What a pose set can tell: identifiability, observability, the first paper's
-reconstructions and screw model, orientation reach, pose selection, rank structure, scoring."""
+reconstructions and screw model, orientation reach, pose selection, rank structure, scoring,
+ISO 9283 pose accuracy and repeatability."""
 
 from common.face import face
 
@@ -12,6 +13,15 @@ __all__, __getattr__, __dir__ = face(
             "analyse",
             "scaled_jacobian",
             "zero_columns",
+        ),
+        "iso9283": (
+            "ORIENTATION_KEYS",
+            "POSITION_KEYS",
+            "STANDARD",
+            "IsoSide",
+            "characteristics",
+            "group_commands",
+            "iso_side",
         ),
         "observability_indices": ("observability",),
         "orientation": ("orientation_reach",),

@@ -4,7 +4,8 @@
                              [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
                              [--with D.json]
     python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
-                             [--set test] [--out V.json]
+                             [--set test] [--register | --register-set NAME]
+                             [--iso9283] [--out V.json]
     python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
                              [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
     python -m calib compensate --model M.xml --errors E.toml --result R.json
@@ -33,8 +34,10 @@ Exit codes (calib.fit.verdict): 0 success (a residual above the tracker noise is
 refused); 2 bad input (the message names the cause); 3 the fit did not converge; 4 the data
 do not fit the model (a likely data error named, too many outliers, implausible estimates
 the data determine well, an implausible residual, or a residual above an explicit
-``--max-ratio``); verify, compensate and export of a result identify refused exit with
-identify's code (compensate and export write nothing unless ``--force``); 5 some
+``--max-ratio``; verify: readings that the result's registration leaves an order of magnitude
+beyond its residual, likely another tracker station, without ``--register``); verify,
+compensate and export of a result identify refused exit with identify's code (compensate and
+export write nothing unless ``--force``); 5 some
 desired poses out of reach (compensate); 130 interrupted.
 """
 
@@ -50,6 +53,8 @@ from pathlib import Path
 import calib.cli.compensate as cmd_compensate
 import calib.cli.export as cmd_export
 import calib.cli.plan as cmd_plan
+import calib.cli.verify_day as verify_day
+import calib.cli.verify_iso as verify_iso
 from calib.cli.common import (
     identify_exit_code,
     positive_int,
@@ -69,10 +74,10 @@ from calib.fit import (
     EXIT_OK,
     CalibrationRun,
     model_from_files,
+    probe_summary,
     regularisation_text,
     rejected_rows,
     result_content,
-    verify_result,
 )
 from calib.loop import model_for_result, parameter_entry
 from common.atomic_files import json_text
@@ -94,6 +99,8 @@ def _print_run(run: CalibrationRun) -> None:
     )
     if run.fuller is not None:
         print(run.fuller.sentence())
+    if run.obs.rotations is not None:
+        print(probe_summary(run))
     rows = rejected_rows(run)
     if rows:
         print(f"{len(rows)} reading(s) rejected as gross outliers:")
@@ -165,6 +172,12 @@ def _csv_text(rows: list[dict]) -> str:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
+    if args.result is None and (args.register or args.register_set or args.iso9283):
+        raise CalibError(
+            "--register, --register-set and --iso9283 score a result (--result R.json); a "
+            "model scored as it is is registered on the 'calibration' rows, else on the "
+            "scored ones"
+        )
     if args.result is None:  # the model as it is, e.g. one written by export
         import calib.cli.verify_as_is as verify_as_is
 
@@ -183,12 +196,20 @@ def cmd_verify(args: argparse.Namespace) -> int:
             "scores below are of a fit the data did not support",
             file=sys.stderr,
         )
-    v, selection = verify_result(model, loaded, dataset, args.set)
+    chosen = verify_day.verification(model, loaded, dataset, args)
+    if isinstance(chosen, int):
+        return chosen
+    v, selection = chosen
     print(selection)
     _say_directions(model, model.state)
     print(v.note)
     for side in ("before", "after"):
         print(getattr(v, side).line(f"{side:6s}"))
+    if args.iso9283:  # the ISO report is what --out then writes
+        content = {"result": str(args.result), "data": str(args.data), "set": args.set}
+        values = loaded.values_for(model.params)
+        verify_iso.run(model, values, dataset, v, args.out, {**content, "selection": selection})
+        return refused
     if args.out:
         from calib.cli.verify_figure import save_verification_png
 
@@ -292,6 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(e.g. one written by export), a tracker frame registered on the calibration rows",
     )
     ver.add_argument("--set", help="score the rows of this set (default: all rows)")
+    verify_day.add_options(ver)
     diag = sub.add_parser(
         "diagnose", help="test the residual of a geometric calibration for unmodelled effects"
     )

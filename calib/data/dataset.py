@@ -44,6 +44,38 @@ def check_names(values: Sequence[str], what: str) -> tuple[str, ...]:
     return names
 
 
+QUAT_UNIT_TOLERANCE = 1e-6  # |q| - 1 beyond this is no unit quaternion
+
+
+def checked_orientations(value: object, shape: tuple[int, int, int]) -> np.ndarray:
+    """Orientations (P, T, R, 4), NaN for targets without one: each target has them at every
+    pose and repeat or at none, each a unit quaternion."""
+    arr = np.array(value, dtype=float)
+    if arr.shape != (*shape, 4):
+        raise DatasetError(f"orientations has shape {arr.shape}, expected {(*shape, 4)}")
+    finite = np.isfinite(arr).all(axis=-1)
+    per_target = finite.transpose(1, 0, 2).reshape(shape[1], -1)
+    mixed = np.flatnonzero(per_target.any(axis=1) & ~per_target.all(axis=1))
+    if mixed.size:
+        raise DatasetError(
+            f"target index {int(mixed[0])} has an orientation at some rows and not at others"
+        )
+    if np.any(np.isfinite(arr).any(axis=-1) & ~finite):
+        raise DatasetError("a quaternion is partly given (all four values or none)")
+    norms = np.linalg.norm(np.where(finite[..., None], arr, 0.0), axis=-1)
+    if np.any(finite & (np.abs(norms - 1.0) > QUAT_UNIT_TOLERANCE)):
+        raise DatasetError("orientations must be unit quaternions (w, x, y, z)")
+    arr.setflags(write=False)
+    return arr
+
+
+def oriented_targets(orientations: np.ndarray | None, n_targets: int) -> np.ndarray:
+    """(T,) bool: which targets carry an orientation."""
+    if orientations is None:
+        return np.zeros(n_targets, dtype=bool)
+    return np.isfinite(orientations).all(axis=-1).all(axis=(0, 2))
+
+
 def _array(value: Any, name: str, shape: tuple[int, ...], integer: bool = False) -> np.ndarray:
     """Read-only copy of ``value`` checked against ``shape`` (-1 = any size >= 1)."""
     arr = np.array(value)
@@ -87,6 +119,9 @@ class Dataset:
     temperature_c: NDArray[np.float64] | None = None
     direction: NDArray[np.float64] | None = None
     commanded_poses: NDArray[np.float64] | None = None
+    # (P, T, R, 4) unit quaternions (w, x, y, z) of the targets' frames, NaN for targets
+    # without one (calib.data.orientation_columns)
+    orientations: NDArray[np.float64] | None = None
     tracker: dict[str, Any] | None = None
     meta: dict[str, Any] | None = None
     notes: str = ""
@@ -136,11 +171,18 @@ class Dataset:
             put("direction", d)
         if self.commanded_poses is not None:
             put("commanded_poses", _array(self.commanded_poses, "commanded_poses", (n, 6)))
+        if self.orientations is not None:
+            put("orientations", checked_orientations(self.orientations, self.readings.shape[:3]))
         for key in ("tracker", "meta"):
             if getattr(self, key) is not None and not isinstance(getattr(self, key), dict):
                 raise DatasetError(f"{key} must be a dict or None")
         if not isinstance(self.notes, str):
             raise DatasetError("notes must be a string")
+
+    @property
+    def oriented(self) -> NDArray[np.bool_]:
+        """(T,) which targets carry an orientation (a 6-DoF probe)."""
+        return oriented_targets(self.orientations, self.n_targets)
 
     @property
     def n_poses(self) -> int:
@@ -202,6 +244,7 @@ class Dataset:
             temperature_c=take(self.temperature_c),
             direction=take(self.direction),
             commanded_poses=take(self.commanded_poses),
+            orientations=take(self.orientations),
         )
 
     def select_set(self, name: str) -> Dataset:
@@ -240,4 +283,5 @@ class Dataset:
             commands=self.commands[:, a],
             readings=self.readings[:, t],
             direction=None if self.direction is None else self.direction[:, a],
+            orientations=None if self.orientations is None else self.orientations[:, t],
         )

@@ -29,6 +29,7 @@ from calib.data.dataset import (
     check_names,
     sidecar_path,
 )
+from calib.data.orientation_columns import QUAT_COLUMNS, parse_quaternion, refuse_rotation_columns
 from common.write_set import write_files
 from twin.formats.parameter_file import closest, read_utf8
 
@@ -76,7 +77,7 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
     dir_cols = [] if ds.direction is None else [DIR_PREFIX + a for a in ds.actuator_names]
     header += cmd_cols + dir_cols
     header += list(POSE_COLUMNS) if ds.commanded_poses is not None else []
-    header += ["x_mm", "y_mm", "z_mm"]
+    header += ["x_mm", "y_mm", "z_mm"] + (list(QUAT_COLUMNS) if ds.orientations is not None else [])
     commands = _file_commands(ds.commands, ds.actuator_units)
     points = ds.readings * 1000.0
     buf = io.StringIO()
@@ -95,6 +96,9 @@ def write_csv_dataset(dataset: Dataset, csv_path: str | os.PathLike[str]) -> Pat
         for t, target in enumerate(ds.target_names):
             for r in range(ds.n_repeats):
                 xyz = [_fmt(v) for v in points[p, t, r]]
+                if ds.orientations is not None:
+                    q = ds.orientations[p, t, r]
+                    xyz += [_fmt(v) for v in q] if np.isfinite(q).all() else [""] * 4
                 row = [str(int(ds.pose_ids[p])), ds.sets[p], target, str(r), *extra]
                 writer.writerow([*row, *per_pose, *xyz])
     sidecar: dict[str, Any] = {
@@ -196,6 +200,7 @@ def _read_sidecar(path: Path) -> dict[str, Any]:
 
 
 def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[str, int]:
+    refuse_rotation_columns(path, header)
     dups = sorted({h for h in header if header.count(h) > 1})
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     no_cmd = [a for a in actuators if CMD_PREFIX + a not in header]
@@ -204,7 +209,7 @@ def _columns(path: Path, header: list[str], actuators: Sequence[str]) -> dict[st
     pose = [c for c in POSE_COLUMNS if c in header]
     dirs = {DIR_PREFIX + a for a in actuators}
     dir_given = [h for h in header if h.startswith(DIR_PREFIX)]
-    known = {*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS, *POSE_COLUMNS, *declared, *dirs}
+    known = {*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS, *POSE_COLUMNS, *QUAT_COLUMNS, *declared, *dirs}
     unknown = [h for h in header if h not in known and h not in undeclared]
     if not set(header) & ({*known, *undeclared} - set(OPTIONAL_COLUMNS)):
         shown = ",".join(header)
@@ -293,6 +298,8 @@ def _group_rows(
         values = [cell["set"]]
         values += [_number(loc, c, cell[c], integer=c == "order") for c in pose_cols[1:]]
         xyz = [_number(loc, c, cell[c]) for c in ("x_mm", "y_mm", "z_mm")]
+        if "qw" in cell:  # NaN where the target has no orientation
+            xyz += parse_quaternion(loc, [cell[c] for c in QUAT_COLUMNS]) or [math.nan] * 4
         first_line, first, points = poses.setdefault(pid, (line, values, {}))
         for c, old, new in zip(pose_cols, first, values, strict=True):
             if old != new:
@@ -369,6 +376,7 @@ def read_csv_dataset(
     readings = np.array(
         [[[pts[t, r] for r in range(n_rep)] for t in range(len(targets))] for _, _, pts in recs]
     )
+    quats = readings[..., 3:] if "qw" in col else None
     try:
         return Dataset(
             model=side["model"],
@@ -379,7 +387,8 @@ def read_csv_dataset(
             pose_ids=np.array(list(poses), dtype=np.int64),
             sets=np.array([vals[0] for _, vals, _ in recs]),
             commands=_si_commands(table[:, : len(acts)], units),
-            readings=readings / 1000.0,
+            readings=readings[..., :3] / 1000.0,
+            orientations=quats,
             order=opt["order"].astype(np.int64) if "order" in opt else None,
             time_s=opt.get("time_s"),
             temperature_c=opt.get("temperature_c"),

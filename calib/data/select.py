@@ -55,4 +55,5 @@ def subset(dataset: Dataset, mask: np.ndarray) -> Dataset:
         temperature_c=cut(dataset.temperature_c),
         direction=cut(dataset.direction),
         commanded_poses=cut(dataset.commanded_poses),
+        orientations=cut(dataset.orientations),
     )

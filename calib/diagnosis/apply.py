@@ -50,7 +50,8 @@ def kept_rows(result: IdentificationResult, shape: tuple[int, int]) -> np.ndarra
     """(N, T*3) boolean: the residual rows of the readings ``result`` kept (not rejected)."""
     keep = np.ones(shape, dtype=bool)
     for rej in result.rejected:
-        keep[rej.pose_index, rej.target_index] = False
+        if rej.target_index < shape[1]:  # beyond: a probe's orientation (its point kept)
+            keep[rej.pose_index, rej.target_index] = False
     return np.repeat(keep, 3, axis=1)
 
 

@@ -53,6 +53,12 @@ __all__, __getattr__, __dir__ = face(
             "Verification",
             "score_side",
         ),
+        "verify_register": (
+            "STATION_RATIO",
+            "StationCheck",
+            "station_check",
+            "verify_registered",
+        ),
         "workflow": (
             "CalibrationRun",
             "FitFailed",
@@ -61,6 +67,7 @@ __all__, __getattr__, __dir__ = face(
             "verify_result",
         ),
         "run_content": (
+            "probe_summary",
             "regularisation_text",
             "rejected_rows",
             "result_content",

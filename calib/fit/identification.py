@@ -28,6 +28,7 @@ from calib.exceptions import IdentifiabilityError
 from calib.fit.model import CalibrationModel, Prediction
 from calib.fit.observations import FRAMES, Observations, bind_dataset, model_from_files
 from calib.fit.prior import Prior, padded_rows, physical_ranges
+from calib.fit.probe_rows import ProbeRows, interleave
 from calib.fit.redundancy import Redundancy, choose_fixed
 from calib.fit.registration import (
     NAMES as REGISTRATION_NAMES,
@@ -286,10 +287,16 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     names = model.params.names
     x_start = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
     commands, measured = obs.commands, obs.measured
-    n_targets = measured.shape[1]
-    n_readings = measured.shape[0] * n_targets
+    n_poses = len(commands)
+    probe = ProbeRows.of(model.nominal, obs.rotations, obs.orientation_weight_m)
+    # a probe's orientation rows are one more reading of its pose (calib.fit.probe_rows)
+    n_targets = measured.shape[1] + (0 if probe is None else probe.n)
+    n_readings = n_poses * n_targets
     first = model.predict(x_start, commands)
-    jac0 = model.jacobian(x_start, first)
+    geo0 = jac0 = model.jacobian(x_start, first)
+    if probe is not None:
+        ang0 = model.tool_twist_jacobian(x_start, first.qpos)[:, 3:, :]
+        jac0 = interleave(geo0, -probe.jacobian(ang0, None)[0], n_poses)
     reg0 = jreg0 = None
     centre = np.zeros(3)
     ranges = physical_ranges(model.params)
@@ -298,8 +305,13 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
         reg0 = initial_registration(measured, first.targets)
         jreg0 = rigid_motion_span(first.targets)  # at the model's points: structure only
         r0 = (reg0.to_base(measured) - first.targets).reshape(-1)
+        if probe is not None:
+            jreg0 = interleave(jreg0, probe.registration_span(n_poses), n_poses)
     else:
         r0 = (measured - first.targets).reshape(-1)
+    if probe is not None:
+        rot0 = None if reg0 is None else reg0.rotation
+        r0 = interleave(r0, probe.residual(model.mechanism(x_start), first.qpos, rot0), n_poses)
     report, redundant = _analyse(
         jac0, names, jreg0, r0, ranges, model.nominal, model.params.parameters
     )
@@ -329,6 +341,10 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
             pred = model.predict(x, commands) if pred is None else pred
             meas = measured if reg is None else reg.to_base(measured)
             r = (meas - pred.targets).reshape(-1)
+            if probe is not None:
+                rot = None if reg is None else reg.rotation
+                r_o = probe.residual(model.mechanism(x), pred.qpos, rot)
+                r = interleave(r, r_o, n_poses)
             r = r if rows is None else r[rows]
             if prior_w is not None:
                 r = np.concatenate([r, -padded_rows(prior_w, z[:k] - x_start[free])[0]])
@@ -345,6 +361,12 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
                     jac = jac @ basis
             if reg0 is not None:
                 jac = np.hstack([jac, registration_jacobian(reg0, z[k:], measured)])
+            if probe is not None:
+                ang = model.tool_twist_jacobian(x, pred.qpos)[:, 3:, :][:, :, free]
+                ang = ang if basis is None else ang @ basis
+                par, reg_o = probe.jacobian(ang, None if reg0 is None else z[k:])
+                o = par if reg_o is None else np.concatenate([par, reg_o], axis=2)
+                jac = interleave(jac, o, n_poses)
             jac = jac if rows is None else jac[rows]
             if prior_w is not None:
                 pj = -padded_rows(prior_w, z[:k] - x_start[free])[1]
@@ -357,7 +379,7 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     residual, jacobian = problem(None)
     # the model's prediction and Jacobian at the start (x_start, the registration's start)
     # are the fit's first evaluation: no second closure solve and Jacobian for it
-    start = (residual(z_start, first)[0], jacobian(z_start, first, jac0))
+    start = (residual(z_start, first)[0], jacobian(z_start, first, geo0))
     res = levenberg_marquardt(residual, jacobian, z_start, options, (ClosureError,), start)
     iterations = res.iterations
     norms = np.linalg.norm(res.residual[: 3 * n_readings].reshape(-1, 3), axis=1)
@@ -391,7 +413,7 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
             jtj = res.jacobian.T @ res.jacobian
     m = 3 * n_kept
     r_meas = res.residual[:m]
-    pose_of_row = np.repeat(np.arange(len(commands)), 3 * n_targets)
+    pose_of_row = np.repeat(np.arange(n_poses), 3 * n_targets)
     if rejected:
         pose_of_row = pose_of_row[rows]
     dof = max(m - n_unknown, 1)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib.data.dataset import Dataset, DatasetError
+from calib.data.orientation_columns import mean_rotation
 from calib.fit.kinds import PoseState
 from calib.fit.model import CalibrationModel
 from twin.formats.parameter_file import load_parameter_set
@@ -32,6 +33,10 @@ class Observations:
     target_names: tuple[str, ...] | None = None
     frame: str = "base"
     state: PoseState | None = None  # directions, time, temperature (the offset kinds')
+    # 6-DoF probes: the targets' frames (P, T, 3, 3) in the readings' frame, NaN for targets
+    # without one, and the weight of their rows (m / rad, calib.fit.probe_rows)
+    rotations: np.ndarray | None = None
+    orientation_weight_m: float | None = None
 
 
 def bind_dataset(mech: Mechanism, dataset: Dataset) -> Observations:
@@ -59,6 +64,10 @@ def bind_dataset(mech: Mechanism, dataset: Dataset) -> Observations:
                 f"but the dataset declares '{unit}'"
             )
     check_command_strokes(mech, np.asarray(ds.commands), ds.pose_labels)
+    rotations = None
+    if ds.orientations is not None and ds.oriented.any():
+        rotations = np.full((ds.n_poses, ds.n_targets, 3, 3), np.nan)
+        rotations[:, ds.oriented] = mean_rotation(ds.orientations[:, ds.oriented])
     return Observations(
         commands=np.array(ds.commands),
         measured=np.array(ds.measured),
@@ -66,6 +75,7 @@ def bind_dataset(mech: Mechanism, dataset: Dataset) -> Observations:
         target_names=tuple(ds.target_names),
         frame=ds.frame,
         state=PoseState.of(ds),
+        rotations=rotations,
     )
 
 

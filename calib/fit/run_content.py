@@ -8,13 +8,27 @@ from typing import Any
 import numpy as np
 
 from calib.fit.prior import physical_ranges
+from calib.fit.probe_rows import probe_line
 from calib.fit.regularisation import cut_label
+from calib.fit.verify import probe_deg
 from calib.fit.workflow import CalibrationRun
+
+
+def probe_summary(run: CalibrationRun) -> str:
+    """The line identify prints of 6-DoF readings (calib.fit.probe_rows.probe_line)."""
+    res, obs = run.result, run.obs
+    pred = run.model.predict(res.values, obs.commands)
+    deg = probe_deg(run.model, res.values, pred.qpos, obs.rotations, res.registration)
+    sigma_deg = float((run.dataset.tracker or {})["sigma_deg"])
+    return probe_line(obs, run.verdict.accuracy.sigma_mm, sigma_deg, deg)
 
 
 def rejected_rows(run: CalibrationRun) -> list[dict[str, Any]]:
     """The rejected readings by the dataset's pose_id and target name, residual in mm."""
-    names = run.model.nominal.target_names
+    names = list(run.model.nominal.target_names)
+    if run.obs.rotations is not None:  # a probe's orientation is a reading of its own
+        oriented = np.isfinite(run.obs.rotations).all(axis=(0, 2, 3))
+        names += [f"{n} (orientation)" for n, o in zip(names, oriented, strict=True) if o]
     return [
         {
             "pose_id": int(run.dataset.pose_ids[r.pose_index]),

@@ -16,6 +16,7 @@ import numpy as np
 
 from calib.fit.model import CalibrationModel
 from calib.fit.position_error import PositionErrorStats, error_norms, stats_mm
+from calib.fit.probe_rows import target_rotations
 from calib.fit.registration import Registration, initial_registration
 from twin.mechanism import Mechanism
 from twin.rigid_fit import fit_rigid_transform
@@ -57,6 +58,12 @@ class Verification:
     before: Side
     after: Side
     note: str
+    # the base-from-tracker frames each side was scored in (None: readings in the base frame)
+    registration_before: Registration | None = None
+    registration_after: Registration | None = None
+    # where the orientation error comes from: "probe" (6-DoF readings), "pattern" (the rigid
+    # fit of three or more targets) or "" (none)
+    orientation_source: str = ""
 
     @property
     def n_poses(self) -> int:
@@ -69,22 +76,30 @@ class Verification:
             "metric": "3D position error per reading |p_measured - p_model| (mm)",
             "before": self.before.as_dict(),
             "after": self.after.as_dict(),
+            "orientation_from": {
+                "probe": "the 6-DoF probes' frames (RMS over the probes per pose)",
+                "pattern": "the rigid fit of the model's target pattern onto the readings",
+            }.get(self.orientation_source),
             "note": self.note,
         }
 
     def rows(self) -> list[dict]:
-        """One row per reading, for the per-pose CSV."""
+        """One row per reading, for the per-pose CSV (with a probe: the pose's orientation
+        error beside each of its readings)."""
         out = []
+        probe = self.orientation_source == "probe"
         for p, pid in enumerate(self.pose_ids):
             for t, name in enumerate(self.target_names):
-                out.append(
-                    {
-                        "pose_id": int(pid),
-                        "target": name,
-                        "before_mm": float(self.before.per_reading_m[p, t] * 1e3),
-                        "after_mm": float(self.after.per_reading_m[p, t] * 1e3),
-                    }
-                )
+                row = {
+                    "pose_id": int(pid),
+                    "target": name,
+                    "before_mm": float(self.before.per_reading_m[p, t] * 1e3),
+                    "after_mm": float(self.after.per_reading_m[p, t] * 1e3),
+                }
+                if probe:
+                    row["before_deg"] = float(self.before.orientation_deg[p])
+                    row["after_deg"] = float(self.after.orientation_deg[p])
+                out.append(row)
         return out
 
 
@@ -96,17 +111,41 @@ def _orientation_deg(local: np.ndarray, measured: np.ndarray, predicted: np.ndar
     return np.degrees(rotation_angle(np.swapaxes(r_pred, -1, -2) @ r_meas))
 
 
-def score_side(mech: Mechanism, measured_base: np.ndarray, predicted: np.ndarray) -> Side:
+def score_side(
+    mech: Mechanism,
+    measured_base: np.ndarray,
+    predicted: np.ndarray,
+    probe_deg: np.ndarray | None = None,
+) -> Side:
     """The errors of readings ``measured_base`` (P, T, 3) against a model's ``predicted``
-    targets: per reading, their statistics, and the tool's orientation error per pose."""
+    targets: per reading, their statistics, and the tool's orientation error per pose (that
+    of the probes, ``probe_deg``, when given; else of three or more targets' pattern)."""
     norms = error_norms(measured_base, predicted)
     local = mech.target_local() if measured_base.shape[1] >= 3 else None
     ori = None if local is None else _orientation_deg(local, measured_base, predicted)
-    return Side(stats_mm(norms), norms, ori)
+    return Side(stats_mm(norms), norms, ori if probe_deg is None else probe_deg)
 
 
-def _side(model: CalibrationModel, measured_base: np.ndarray, predicted: np.ndarray) -> Side:
-    return score_side(model.nominal, measured_base, predicted)
+def probe_deg(
+    model: CalibrationModel,
+    values: np.ndarray,
+    qpos: np.ndarray,
+    rotations: np.ndarray | None,
+    registration: Registration | None,
+) -> np.ndarray | None:
+    """The probes' orientation error per pose (P,), degrees (RMS over the probes of the angle
+    between the measured and the predicted frame), or None without probes. ``rotations``
+    (P, T, 3, 3) in the readings' frame, NaN for targets without one."""
+    if rotations is None:
+        return None
+    oriented = np.flatnonzero(np.isfinite(rotations).all(axis=(0, 2, 3)))
+    if not oriented.size:
+        return None
+    pred = target_rotations(model.mechanism(values), qpos, oriented)
+    meas = rotations[:, oriented]
+    meas = meas if registration is None else registration.rotation @ meas
+    angle = rotation_angle(meas @ np.swapaxes(pred, -1, -2))
+    return np.degrees(np.sqrt(np.mean(angle * angle, axis=1)))
 
 
 def nominal_fit_registration(
@@ -129,6 +168,7 @@ def verify(
     registration_after: Registration | None = None,
     calibration_set: tuple[np.ndarray, np.ndarray] | None = None,
     registration_before: Registration | None = None,
+    rotations: np.ndarray | None = None,
 ) -> Verification:
     """Before (nominal) and after (``values``) errors of readings ``measured`` (P, T, 3).
 
@@ -136,11 +176,13 @@ def verify(
     registration is then fitted on ``calibration_set`` = (commands, readings) of the
     calibration (or given as ``registration_before``: calib.fit.workflow.nominal_registration,
     the one every command uses), or, without either, on these readings (said in ``note``)."""
-    x0 = np.zeros(model.n_parameters)
+    x0, values = np.zeros(model.n_parameters), np.asarray(values, dtype=float)
     fresh = CalibrationModel(model.nominal, model.params)
     fresh.bind_state(model.state)  # of these readings (the offset kinds read it)
-    nominal = fresh.predict(x0, commands).targets
-    after = fresh.predict(np.asarray(values, dtype=float), commands).targets
+    pred0 = fresh.predict(x0, commands)
+    nominal = pred0.targets
+    pred1 = fresh.predict(values, commands)
+    after = pred1.targets
     if registration_after is None:
         before_base = after_base = measured
         note = "readings in the machine's base frame"
@@ -162,10 +204,22 @@ def verify(
             )
         before_base = reg0.to_base(measured)
         after_base = registration_after.to_base(measured)
+    reg_before = None if registration_after is None else reg0
+    ori0 = probe_deg(fresh, x0, pred0.qpos, rotations, reg_before)
+    ori1 = probe_deg(fresh, values, pred1.qpos, rotations, registration_after)
     return Verification(
         pose_ids=np.asarray(pose_ids),
         target_names=model.nominal.target_names,
-        before=_side(model, before_base, nominal),
-        after=_side(model, after_base, after),
+        before=score_side(model.nominal, before_base, nominal, ori0),
+        after=score_side(model.nominal, after_base, after, ori1),
         note=note,
+        registration_before=reg_before,
+        registration_after=registration_after,
+        orientation_source=orientation_source(ori0, measured),
     )
+
+
+def orientation_source(probe: np.ndarray | None, measured: np.ndarray) -> str:
+    if probe is not None:
+        return "probe"
+    return "pattern" if measured.shape[1] >= 3 else ""

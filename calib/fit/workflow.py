@@ -38,6 +38,7 @@ from calib.fit.prior import (
     physical_ranges,
     weakly_identified,
 )
+from calib.fit.probe_rows import orientation_weight
 from calib.fit.regularisation import PriorChoice, choose_prior
 from calib.fit.verdict import (
     DEFAULT_MAX_RATIO,
@@ -114,6 +115,9 @@ def calibrate(
             poor_data=True,
         )
     accuracy = noise_rule(sigma_mm, picked)  # declared, else the repeats, else assumed
+    if obs.rotations is not None:  # 6-DoF probes: their rows weighed by the two accuracies
+        weight = orientation_weight(accuracy.sigma_mm, picked.tracker)
+        obs = replace(obs, orientation_weight_m=weight)
     options = None if max_iterations is None else LMOptions(max_iterations=max_iterations)
     starts = None if start is None else dict(zip(model.params.names, start, strict=True))
     fit = _Fitter(obs, unidentifiable, options, prior_spec, regularise, starts)
@@ -246,7 +250,8 @@ def judge(
     norms = np.linalg.norm(measured - pred.targets, axis=-1)
     keep = np.ones(norms.shape, dtype=bool)
     for r in result.rejected:
-        keep[r.pose_index, r.target_index] = False
+        if r.target_index < keep.shape[1]:  # beyond: a probe's orientation (its point kept)
+            keep[r.pose_index, r.target_index] = False
     stats = stats_mm(norms[keep])
     message = result.convergence_message or (
         f"stopped after {result.iterations} iterations without the step or the cost change "
@@ -311,6 +316,7 @@ def verify_result(
             picked.pose_ids,
             registration_after=loaded.registration,
             registration_before=before,
+            rotations=obs.rotations,
         )
     except TwinError as exc:  # e.g. no closure at the result's values: name the odd ones
         raise unusable_values(loaded, model.params, exc) from None

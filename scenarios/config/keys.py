@@ -128,7 +128,37 @@ def _liu_vs_ols_keys() -> dict[str, Key | Table]:
     )
 
 
+_ISO_TRACKER = _ARM_TRACKER
+_STROKE_FRACTION = Key(float, required=True, min=0, max=1)
+_ISO9283 = {
+    "seed": _SEED,
+    "truth": Table({"random": Table(_TRUTH_RANDOM.keys, required=True)}, required=True),
+    "tracker": _ISO_TRACKER,
+    "repeatability": Table(
+        {"position_mm": Key(float, required=True, min=0), "rotation_deg": _NONNEG},
+        required=True,
+    ),
+    "plan": Table(
+        {"calibration_poses": _COUNT, "cycles": Key(int, required=True, min=2)}, required=True
+    ),
+    "cube": Table(
+        {"edge_mm": Key(float, required=True, above=0), "at_stroke": _STROKE_FRACTION},
+        required=True,
+    ),
+    "arm": Table(
+        {
+            "model": Key(str, required=True, path=True),
+            "error_model": Key(str, required=True, path=True),
+            "joint_fraction": Key(float, required=True, above=0, max=1),
+            "edge_mm": Key(float, required=True, above=0),
+            "at_stroke": _STROKE_FRACTION,
+        },
+        required=True,
+    ),
+}
+
 SCHEMAS: dict[str, Table] = {
+    "iso9283": _base(**_ISO9283),
     "hexapod_paper": _base(
         seed=_SEED,
         truth=_truth(),

@@ -30,6 +30,7 @@ STUDIES = {
         "scenarios.studies.diagnosis_benchmark.study",
         "scenarios.studies.diagnosis_benchmark.report",
     ),
+    "iso9283": ("scenarios.studies.iso9283.study", "scenarios.studies.iso9283.report"),
 }
 
 __all__ = ["STUDIES"]
