@@ -27,6 +27,7 @@ CHECKED = {
     "serial_arm": "test_recording",
     "polisher_identifiability": "test_recording",
     "measured_loop": "test_recording",
+    "iso9283": "test_iso9283_study",
     "diagnosis_benchmark": "test_diagnosis_benchmark",
     "sweep": "test_sweep",
 }

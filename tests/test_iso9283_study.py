@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from recording_faces import assert_every_face_has_data
 
 from scenarios.runner import run_scenario
 
@@ -12,7 +13,7 @@ from scenarios.runner import run_scenario
 @pytest.fixture(scope="module")
 def summary(tmp_path_factory):
     s, out = run_scenario(
-        "iso9283", results_root=tmp_path_factory.mktemp("iso"), quiet=True, record=False
+        "iso9283", results_root=tmp_path_factory.mktemp("iso"), quiet=True, record=True
     )
     return s, out
 
@@ -70,3 +71,9 @@ def test_repeatability_is_what_the_noise_gives_and_accuracy_improves(summary):
     # 10 poses of 30: the mean's sampling spread is about 2.5 %; the rotation noise's lever
     # and the targets' own distances to the tracker add a few per cent
     assert mean == pytest.approx(expected, rel=0.15)
+
+
+def test_the_recording_shows_data_in_every_face(summary):
+    _, out = summary
+    views = assert_every_face_has_data(out / "iso9283.rrd")
+    assert "report: key numbers" in " | ".join(v["name"] for v in views)

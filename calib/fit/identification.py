@@ -20,7 +20,6 @@ import numpy as np
 from calib.analysis.identifiability import (
     IdentifiabilityReport,
     analyse,
-    scaled_jacobian,
     zero_columns,
 )
 from calib.estimators.levenberg_marquardt import LMOptions, levenberg_marquardt
@@ -29,7 +28,7 @@ from calib.fit.model import CalibrationModel, Prediction
 from calib.fit.observations import FRAMES, Observations, bind_dataset, model_from_files
 from calib.fit.prior import Prior, padded_rows, physical_ranges
 from calib.fit.probe_rows import ProbeRows, interleave
-from calib.fit.redundancy import Redundancy, choose_fixed
+from calib.fit.redundancy import Explainer, choose_fixed, with_choice
 from calib.fit.registration import (
     NAMES as REGISTRATION_NAMES,
 )
@@ -214,7 +213,7 @@ def _analyse(
             zero,
             None if reg_jac is None else jac0,
         )
-        return _with_choice(report, red, jac, _Explainer(mech, parameters))
+        return with_choice(report, red, jac, Explainer(mech, parameters), REDUNDANT)
     if reg_jac is None:
         return report, ()
     alone = _analysed(jac0, names)
@@ -223,63 +222,6 @@ def _analyse(
     for n in redundant:
         why[n] = REDUNDANT
     return replace(report, unidentifiable=why), redundant
-
-
-@dataclass(frozen=True)
-class _Explainer:
-    """Says why a redundant group is one, where the mechanism shows it."""
-
-    mech: Mechanism | None
-    parameters: tuple[Parameter, ...]
-
-    def __call__(self, members: list[int]) -> str:
-        if self.mech is None or not self.parameters:
-            return ""
-        kinds = [self.parameters[i].kind for i in members]
-        zeros = [self.parameters[i] for i in members if self.parameters[i].kind == "joint_zero"]
-        if (
-            self.mech.n_targets == 1
-            and len(zeros) == 1
-            and kinds.count("site_pos") == len(members) - 1
-            and len(members) > 1
-        ):
-            return (
-                f"; one reflector cannot separate a rotation of joint {zeros[0].element} from "
-                "an offset of the reflector in the plane normal to that joint"
-            )
-        return ""
-
-
-def _with_choice(
-    report: IdentifiabilityReport, red: Redundancy, jac: np.ndarray, explain: _Explainer
-) -> tuple[IdentifiabilityReport, tuple[str, ...]]:
-    """The report with the fixed set of ``red`` and reasons naming the partners; ``jac`` the
-    Jacobian the report was made of (the registration projected out)."""
-    names = report.names
-    why: dict[str, str] = {}
-    redundant = []
-    for j in red.fixed:
-        name = names[j]
-        partners = [names[i] for i in red.partners[j]]
-        if not partners and not red.with_registration[j]:
-            why[name] = report.unidentifiable.get(name, "has no effect on the measurements")
-            continue
-        if not partners:
-            why[name] = REDUNDANT
-            redundant.append(name)
-            continue
-        shown = ", ".join(partners[:4]) + (" ..." if len(partners) > 4 else "")
-        with_reg = " and the tracker registration" if red.with_registration[j] else ""
-        why[name] = (
-            f"redundant with {shown}{with_reg}: the readings cannot tell its effect from "
-            "theirs; fixed at 0 as the member whose removal keeps the estimates smallest"
-            + explain([j, *red.partners[j]])
-        )
-    keep = [k for k in range(len(names)) if k not in set(red.fixed)]
-    cond = float(np.linalg.cond(scaled_jacobian(jac[:, keep])[0])) if keep else float("inf")
-    identifiable = tuple(names[k] for k in keep)
-    report = replace(report, identifiable=identifiable, unidentifiable=why, condition_number=cond)
-    return report, tuple(redundant)
 
 
 def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, prior, basis=None):

@@ -22,9 +22,13 @@ every platform.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from calib.analysis.identifiability import IdentifiabilityReport, scaled_jacobian
+from twin.mechanism import Mechanism
+from twin.parameters import Parameter
 
 TIE = 1e-6
 MEMBER_RTOL = 1e-6  # a null-space component below this fraction of the largest is no member
@@ -131,3 +135,65 @@ def choose_fixed(
             moved /= max(float(np.linalg.norm(unprojected[:, j] * ranges[j])), 1e-300)
         with_reg[int(j)] = moved > REGISTRATION_RTOL
     return Redundancy(tuple(int(j) for j in fixed_arr), partners, with_reg)
+
+
+@dataclass(frozen=True)
+class Explainer:
+    """Says why a redundant group is one, where the mechanism shows it."""
+
+    mech: Mechanism | None
+    parameters: tuple[Parameter, ...]
+
+    def __call__(self, members: list[int]) -> str:
+        if self.mech is None or not self.parameters:
+            return ""
+        kinds = [self.parameters[i].kind for i in members]
+        zeros = [self.parameters[i] for i in members if self.parameters[i].kind == "joint_zero"]
+        if (
+            self.mech.n_targets == 1
+            and len(zeros) == 1
+            and kinds.count("site_pos") == len(members) - 1
+            and len(members) > 1
+        ):
+            return (
+                f"; one reflector cannot separate a rotation of joint {zeros[0].element} from "
+                "an offset of the reflector in the plane normal to that joint"
+            )
+        return ""
+
+
+def with_choice(
+    report: IdentifiabilityReport,
+    red: Redundancy,
+    jac: np.ndarray,
+    explain: Explainer,
+    with_registration: str,
+) -> tuple[IdentifiabilityReport, tuple[str, ...]]:
+    """The report with the fixed set of ``red`` and reasons naming the partners; ``jac`` the
+    Jacobian the report was made of (the registration projected out); ``with_registration``
+    the reason of a member redundant with the registration alone."""
+    names = report.names
+    why: dict[str, str] = {}
+    redundant = []
+    for j in red.fixed:
+        name = names[j]
+        partners = [names[i] for i in red.partners[j]]
+        if not partners and not red.with_registration[j]:
+            why[name] = report.unidentifiable.get(name, "has no effect on the measurements")
+            continue
+        if not partners:
+            why[name] = with_registration
+            redundant.append(name)
+            continue
+        shown = ", ".join(partners[:4]) + (" ..." if len(partners) > 4 else "")
+        with_reg = " and the tracker registration" if red.with_registration[j] else ""
+        why[name] = (
+            f"redundant with {shown}{with_reg}: the readings cannot tell its effect from "
+            "theirs; fixed at 0 as the member whose removal keeps the estimates smallest"
+            + explain([j, *red.partners[j]])
+        )
+    keep = [k for k in range(len(names)) if k not in set(red.fixed)]
+    cond = float(np.linalg.cond(scaled_jacobian(jac[:, keep])[0])) if keep else float("inf")
+    identifiable = tuple(names[k] for k in keep)
+    report = replace(report, identifiable=identifiable, unidentifiable=why, condition_number=cond)
+    return report, tuple(redundant)
