@@ -102,31 +102,43 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
         "regularise": not getattr(args, "plain", False),
     }
     try:
-        start = _geometric_start(base, model, dataset, options) if effect else None
+        start = None
+        if effect:
+            start, model = _geometric_start(base, model, dataset, options, effect)
         return calibrate(model, dataset, start=start, **options)
     except FitFailed as exc:
         return failed(exc)
 
 
 def _geometric_start(
-    base: CalibrationModel, model: CalibrationModel, dataset: Dataset, options: dict
-) -> np.ndarray | None:
+    base: CalibrationModel,
+    model: CalibrationModel,
+    dataset: Dataset,
+    options: dict,
+    effect: str,
+) -> tuple[np.ndarray | None, CalibrationModel]:
     """The start of a fit with a diagnosed effect: the geometric fit's estimate, where the
     diagnosis formed the effect's columns (an added parameter can move the readings there
     and not at the nominal model: a joint with the nominal reflector on its axis), the added
-    parameters at zero. None (the nominal start) when the geometric fit is refused."""
+    parameters at zero; None (the nominal start) when the geometric fit is refused. And the
+    model to fit: the geometric fit's own (the error model's fuller variant when identify
+    kept it, calib.fit.fuller_model) with the effect's parameters."""
     geo = calibrate(base, dataset, **{**options, "max_ratio": None})
     if not geo.verdict.ok:
-        return None
+        return None, model
+    if geo.model.n_parameters != base.n_parameters:  # the fuller geometry, and the effect
+        model = extended_model(geo.model, load_effect(effect, geo.model)["added_parameters"])
+        added = ", ".join(geo.model.params.names[base.n_parameters :])
+        print(f"the geometry as identify kept it: the error model and {added}")
     names = list(model.params.names)
     start = np.zeros(model.n_parameters)
     for name, value in zip(geo.result.names, geo.result.values, strict=True):
         start[names.index(name)] = value
     print(
         f"start: the geometric fit's estimate ({geo.residual['rms_mm']:.4f} mm RMS), the "
-        f"{model.n_parameters - base.n_parameters} added parameters at zero"
+        f"{model.n_parameters - geo.model.n_parameters} added parameters at zero"
     )
-    return start
+    return start, model
 
 
 def result_options(p: argparse.ArgumentParser) -> None:

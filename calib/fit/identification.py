@@ -52,6 +52,7 @@ from calib.fit.robust import (
     robust_scale,
     suspect_outliers,
 )
+from calib.fit.verdict import implausible_estimates
 from twin.exceptions import ClosureError
 from twin.kinematics.structure import one_blas_thread
 from twin.mechanism import Mechanism
@@ -145,6 +146,13 @@ def identify(
             return plain
         free = plain.estimated
         ranges = physical_ranges(model.params)[free]
+        params = model.params
+        implausible = implausible_estimates(
+            tuple(np.asarray(params.names)[free]),
+            params.to_display(plain.values)[free],
+            np.asarray(params.display_units(), dtype=object)[free],
+            params.to_display(plain.std_errors)[free],
+        )
         choice = choose_subspace(
             plain.fit_jacobian,
             plain.fit_residual,
@@ -154,6 +162,7 @@ def identify(
             one_se=plain.converged,
             # the offset kinds' sizes are no machine's known size: estimated in full
             always=np.asarray(model.params.is_offset, dtype=bool)[free],
+            implausible=implausible,
         )
         res = plain
         if choice.basis is not None:

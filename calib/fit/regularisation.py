@@ -104,6 +104,7 @@ def choose_subspace(
     cuts: tuple[float | None, ...] = CUTS,
     one_se: bool = True,
     always: np.ndarray | None = None,
+    implausible: tuple[str, ...] = (),
 ) -> SubspaceChoice:
     """The subspace to estimate in, from the plain least-squares fit's linearisation:
     ``residual`` (m,) there and ``jac`` (m, k + r) d residual / d (free parameters, then the
@@ -112,10 +113,14 @@ def choose_subspace(
     ``one_se=False`` drops the one-standard-error rule: for a plain fit that did not
     converge, which is no answer for the rule to protect.
     ``always`` (k,) bool: parameters estimated in full beside the subspace, as the
-    registration is (those without a known physical size to measure weakness in)."""
+    registration is (those without a known physical size to measure weakness in).
+    ``implausible``: the plain fit's estimates beyond a plausible size that it determines
+    well (calib.fit.verdict.implausible_estimates): plain least squares is then no candidate
+    (a few per cent of cross-validated error does not buy a 2.8 m link offset), the best cut
+    is taken and the reason says so."""
     if always is not None and np.any(always):
         return _with_always(
-            jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se
+            jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se, implausible
         )
     m, k = len(residual), len(ranges)
     sigma = math.sqrt(float(residual @ residual) / max(m - jac.shape[1], 1))
@@ -148,6 +153,18 @@ def choose_subspace(
     # one-standard-error rule: a cut is a candidate only where its gain over plain least
     # squares, the mean over poses of the paired difference of their held-out squared
     # errors, exceeds that mean's standard error (what the poses' scatter can tell)
+    width = _kept(a, reg, sigma, None)[0].shape[1]
+    cut_only = [c for c in cuts if c is not None and _kept(a, reg, sigma, c)[0].shape[1] < width]
+    if implausible and cut_only:  # no plain answer: the best cut, whatever its gain
+        chosen = min(cut_only, key=lambda c: (cv[cut_label(c)], -c))
+        v, _ = _kept(a, reg, sigma, chosen)
+        reason = (
+            "plain least squares put estimates beyond a plausible size "
+            f"({'; '.join(implausible[:3])}) along directions the data barely see; the best "
+            f"cut by {n_folds}-fold "
+            f"cross-validation (3D RMS {cv[cut_label(chosen)]:.4f} mm, plain {plain:.4f} mm)"
+        )
+        return SubspaceChoice(chosen, ranges[:, None] * v, sigma, cv, n_weak, n_folds, reason)
     eligible = [None] + [
         c for c in cuts if c is not None and (not one_se or _clear_gain(per_pose, c))
     ]
@@ -210,7 +227,9 @@ def _clear_gain(per_pose: dict[float | None, np.ndarray], cut: float) -> bool:
     return gain > float(np.std(diff, ddof=1)) / math.sqrt(diff.size)
 
 
-def _with_always(jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se):
+def _with_always(
+    jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se, implausible
+):
     """:func:`choose_subspace` with the ``always`` columns moved beside the registration's,
     its basis carried back to every free parameter (those columns' rows the identity)."""
     always = np.asarray(always, dtype=bool)
@@ -219,7 +238,15 @@ def _with_always(jac, residual, offsets, ranges, pose_of_row, folds, cuts, alway
     cols = np.hstack([jac[:, rest], jac[:, :k][:, always], jac[:, k:]])
     # linear in them, the always-estimated columns' start is irrelevant, as the registration's
     inner = choose_subspace(
-        cols, residual, offsets[rest], ranges[rest], pose_of_row, folds, cuts, one_se=one_se
+        cols,
+        residual,
+        offsets[rest],
+        ranges[rest],
+        pose_of_row,
+        folds,
+        cuts,
+        one_se=one_se,
+        implausible=implausible,
     )
     if inner.basis is None:
         return inner
