@@ -110,3 +110,38 @@ def test_a_settled_cost_ends_the_fit_and_an_unsettled_one_does_not():
     # one iteration short the last window has not settled yet
     short = LMOptions(**{**CREEP.__dict__, "max_iterations": settled.iterations - 1})
     assert not levenberg_marquardt(_flat_valley, _flat_jacobian, np.zeros(2), short).converged
+
+
+def test_plain_with_implausible_estimates_gives_way_to_the_mildest_plausible_cut():
+    """Where plain least squares is kept by cross-validation but puts an estimate beyond a
+    plausible size along a direction the data barely see (the UR5 with encoder eccentricity:
+    two parallel links' offsets at -+2.77 m), the mildest cut whose estimates are plausible is
+    taken instead, and the reason says so; a plausible plain fit is left alone."""
+    jac, residual, plain, ranges, pose = _problem(seed=2, n_poses=20, weak_truth=1.5)
+    kept = choose_subspace(jac, residual, plain, ranges, pose)
+    assert kept.cut is None  # plain by cross-validation (the test above)
+    limit = 0.5 * float(np.max(np.abs(plain)))  # plain's largest estimate is beyond it
+
+    def implausible(values, allow_std=True):
+        big = np.flatnonzero(np.abs(values) > limit)
+        return tuple(f"p{j} = {values[j]:+.3g}" for j in big)
+
+    assert implausible(plain)
+    choice = choose_subspace(jac, residual, plain, ranges, pose, implausible=implausible)
+    assert choice.cut is not None and "beyond a plausible size" in choice.reason
+    # its linearised estimate (from the start, in the kept directions) is plausible, and no
+    # milder cut's is
+    start = residual - jac @ plain
+    for cut in (10.0, 3.0, 1.0):
+        s = np.linalg.svd(jac, compute_uv=False)
+        sigma = math.sqrt(float(residual @ residual) / (jac.shape[0] - jac.shape[1]))
+        v = np.linalg.svd(jac, full_matrices=False)[2][s * cut >= sigma].T
+        est = v @ np.linalg.lstsq(jac @ v, -start, rcond=None)[0]
+        if cut > choice.cut:
+            assert implausible(est) or v.shape[1] == jac.shape[1]
+        elif cut == choice.cut:
+            assert not implausible(est)
+    assert (
+        choose_subspace(jac, residual, plain, ranges, pose, implausible=lambda v, a=True: ()).cut
+        is None
+    )

@@ -147,12 +147,19 @@ def identify(
         free = plain.estimated
         ranges = physical_ranges(model.params)[free]
         params = model.params
-        implausible = implausible_estimates(
-            tuple(np.asarray(params.names)[free]),
-            params.to_display(plain.values)[free],
-            np.asarray(params.display_units(), dtype=object)[free],
-            params.to_display(plain.std_errors)[free],
-        )
+        start_free = np.zeros(int(free.sum())) if x0 is None else np.asarray(x0, float)[free]
+        names = tuple(np.asarray(params.names)[free])
+        units = np.asarray(params.display_units(), dtype=object)[free]
+        std = params.to_display(plain.std_errors)[free]
+
+        def implausible(values: np.ndarray, allow_std: bool = True) -> tuple[str, ...]:
+            """Estimates (SI, from the start) beyond a plausible size, by 3 of the plain
+            fit's standard errors (the verdict's rule), or by any amount."""
+            full = np.zeros(model.n_parameters)
+            full[free] = start_free + values
+            shown = params.to_display(full)[free]
+            return implausible_estimates(names, shown, units, std if allow_std else None)
+
         choice = choose_subspace(
             plain.fit_jacobian,
             plain.fit_residual,
@@ -162,7 +169,8 @@ def identify(
             one_se=plain.converged,
             # the offset kinds' sizes are no machine's known size: estimated in full
             always=np.asarray(model.params.is_offset, dtype=bool)[free],
-            implausible=implausible,
+            # a plain fit that did not converge is no answer to judge: the creeping path below
+            implausible=implausible if plain.converged else None,
         )
         res = plain
         if choice.basis is not None:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,7 +105,7 @@ def choose_subspace(
     cuts: tuple[float | None, ...] = CUTS,
     one_se: bool = True,
     always: np.ndarray | None = None,
-    implausible: tuple[str, ...] = (),
+    implausible: Callable[..., tuple[str, ...]] | None = None,
 ) -> SubspaceChoice:
     """The subspace to estimate in, from the plain least-squares fit's linearisation:
     ``residual`` (m,) there and ``jac`` (m, k + r) d residual / d (free parameters, then the
@@ -114,10 +115,11 @@ def choose_subspace(
     converge, which is no answer for the rule to protect.
     ``always`` (k,) bool: parameters estimated in full beside the subspace, as the
     registration is (those without a known physical size to measure weakness in).
-    ``implausible``: the plain fit's estimates beyond a plausible size that it determines
-    well (calib.fit.verdict.implausible_estimates): plain least squares is then no candidate
-    (a few per cent of cross-validated error does not buy a 2.8 m link offset), the best cut
-    is taken and the reason says so."""
+    ``implausible``: the estimates (k,) (SI, from the start values) beyond a plausible size
+    (calib.fit.verdict.implausible_estimates). Where the plain fit's are, plain least squares
+    is no candidate (a few per cent of cross-validated error does not buy a 2.8 m link
+    offset): the mildest cut whose linearised estimates are plausible is taken (else the
+    strongest), and the reason says so."""
     if always is not None and np.any(always):
         return _with_always(
             jac, residual, offsets, ranges, pose_of_row, folds, cuts, always, one_se, implausible
@@ -155,16 +157,6 @@ def choose_subspace(
     # errors, exceeds that mean's standard error (what the poses' scatter can tell)
     width = _kept(a, reg, sigma, None)[0].shape[1]
     cut_only = [c for c in cuts if c is not None and _kept(a, reg, sigma, c)[0].shape[1] < width]
-    if implausible and cut_only:  # no plain answer: the best cut, whatever its gain
-        chosen = min(cut_only, key=lambda c: (cv[cut_label(c)], -c))
-        v, _ = _kept(a, reg, sigma, chosen)
-        reason = (
-            "plain least squares put estimates beyond a plausible size "
-            f"({'; '.join(implausible[:3])}) along directions the data barely see; the best "
-            f"cut by {n_folds}-fold "
-            f"cross-validation (3D RMS {cv[cut_label(chosen)]:.4f} mm, plain {plain:.4f} mm)"
-        )
-        return SubspaceChoice(chosen, ranges[:, None] * v, sigma, cv, n_weak, n_folds, reason)
     eligible = [None] + [
         c for c in cuts if c is not None and (not one_se or _clear_gain(per_pose, c))
     ]
@@ -175,9 +167,33 @@ def choose_subspace(
         if value <= best * (1 + TIE) and value <= plain * (1 + TIE):
             chosen = cut
     if chosen is None:
+        beyond = () if implausible is None else implausible(offsets)
+        if beyond and cut_only:  # no plain answer: the mildest cut that is physical
+            chosen, v = _plausible_cut(a, reg, start, ranges, sigma, cut_only, implausible)
+            reason = (
+                "plain least squares put estimates beyond a plausible size "
+                f"({'; '.join(beyond[:3])}) along directions the data barely see; the mildest "
+                f"cut whose estimates are plausible ({n_folds}-fold cross-validated 3D RMS "
+                f"{cv[cut_label(chosen)]:.4f} mm, plain {plain:.4f} mm)"
+            )
+            return SubspaceChoice(chosen, ranges[:, None] * v, sigma, cv, n_weak, n_folds, reason)
         return SubspaceChoice(None, None, sigma, cv, n_weak, n_folds)
     v, _ = _kept(a, reg, sigma, chosen)
     return SubspaceChoice(chosen, ranges[:, None] * v, sigma, cv, n_weak, n_folds)
+
+
+def _plausible_cut(a, reg, start, ranges, sigma, cuts, implausible):
+    """(cut, its directions): the mildest of ``cuts`` whose linearised least-squares
+    estimates ``implausible`` finds nothing in, else the strongest."""
+    ordered = sorted(cuts, reverse=True)
+    for cut in ordered:
+        v, _ = _kept(a, reg, sigma, cut)
+        cols = a @ v if reg is None else np.hstack([a @ v, reg])
+        b = np.linalg.lstsq(cols, -start, rcond=None)[0]
+        # by any amount: a cut's own standard errors are smaller than the plain fit's
+        if not implausible(ranges * (v @ b[: v.shape[1]]), False):
+            return cut, v
+    return ordered[-1], _kept(a, reg, sigma, ordered[-1])[0]
 
 
 def creeping_cuts(
@@ -235,6 +251,12 @@ def _with_always(
     always = np.asarray(always, dtype=bool)
     k = len(ranges)
     rest = np.flatnonzero(~always)
+
+    def inner_implausible(values: np.ndarray, allow_std: bool = True) -> tuple[str, ...]:
+        full = np.zeros(k)  # the always-estimated kinds have no plausible size to judge
+        full[rest] = values
+        return implausible(full, allow_std)
+
     cols = np.hstack([jac[:, rest], jac[:, :k][:, always], jac[:, k:]])
     # linear in them, the always-estimated columns' start is irrelevant, as the registration's
     inner = choose_subspace(
@@ -246,7 +268,7 @@ def _with_always(
         folds,
         cuts,
         one_se=one_se,
-        implausible=implausible,
+        implausible=None if implausible is None else inner_implausible,
     )
     if inner.basis is None:
         return inner
