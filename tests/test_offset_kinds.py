@@ -23,7 +23,14 @@ from calib.fit.kinds import PoseState, approach_directions
 from calib.fit.model import CalibrationModel
 from calib.fit.observations import Observations, bind_dataset
 from calib.loop.effect_kinds import _parameter, parameter_entry
-from twin.effects import Backlash, LeadError, ThermalGrowth
+from twin.effects import (
+    Backlash,
+    EncoderEccentricity,
+    LeadError,
+    ThermalGrowth,
+    ThermalWarmup,
+    ZeroDrift,
+)
 from twin.exceptions import ParameterError
 from twin.formats.parameter_file import load_parameter_set
 from twin.measurement import measure
@@ -121,23 +128,36 @@ def test_jacobian_on_a_serial_arm_with_harmonics_and_backlash(arm):
     assert np.max(rel) < 1e-6, params.names[int(np.argmax(rel))]
 
 
-def _recover(mech, extra, effects, n=60, seed=3, x_truth=None):
+def _recover(
+    mech, extra, effects, n=60, seed=3, errors="hexapod_rrrprr", temperature=None, full=False
+):
     """Geometry plus ``extra`` identified from noise-free readings of a truth with geometric
-    errors and the twin's ``effects``, measured in one sequence from the model's home."""
-    base = load_parameter_set(MODELS / "hexapod_rrrprr.params.toml", mech.model)
+    errors and the twin's ``effects``, measured in one sequence from the model's home, 30 s
+    per pose (``temperature``: a function of the order giving each reading's deg C)."""
+    base = load_parameter_set(MODELS / f"{errors}.params.toml", mech.model)
     params = ParameterSet([*base.parameters, *extra], mech.model)
     rng = np.random.default_rng(seed)
-    commands = random_poses(mech, n, rng)[1]
+    if mech.workspace_min is not None:
+        commands = random_poses(mech, n, rng)[1]
+    else:  # a serial arm: joints anywhere in 70 % of their ranges
+        lo, hi = mech.actuator_range.T
+        commands = rng.uniform(0.7 * lo, 0.7 * hi, (n, mech.n_actuators))
     geo = rng.uniform(-1, 1, len(base)) * np.where(base.is_angle, np.radians(0.05), 2e-4)
     truth = mech.with_model(base.inject(mech.model, geo))
     order = np.arange(n)
     m = measure(truth, commands, EXACT, np.random.default_rng(0), effects=effects, order=order)
     home = mech.home_qpos[mech.actuator_qpos]
-    state = PoseState(n, approach_directions(commands, order, home), None, order.astype(float))
+    state = PoseState(
+        n,
+        approach_directions(commands, order, home),
+        30.0 * order,
+        order.astype(float),
+        None if temperature is None else temperature(order),
+    )
     obs = Observations(commands, m.readings.mean(axis=2), state=state)
     model = CalibrationModel(mech, params)
     res = identify(model, obs, unidentifiable="fix")
-    return params, res
+    return (params, res, model, obs, truth) if full else (params, res)
 
 
 def test_noise_free_recovery_of_a_lead_error(hexapod):
@@ -173,6 +193,82 @@ def test_noise_free_recovery_of_thermal_growth_and_backlash(hexapod):
     got = res.values[params.is_offset]
     assert np.max(np.abs(got[:6] - alpha * rate)) < 1e-12  # strain per pose, of 5.8e-7
     assert np.max(np.abs(got[6:] - play / 2)) < 1e-12  # m, of 6e-6
+
+
+def test_noise_free_recovery_of_a_zero_drift(hexapod):
+    """The twin's zero drift r h(t) (its ZeroDrift, tau 20 min, 30 s per pose) is the drift
+    kind on the time_s clock with the same time constant: the rates come back."""
+    rates = np.array([4.0, -3.0, 2.0, 5.0, -1.0, 3.5]) * 1e-9  # m/s: up to 4.7 um in 30 min
+    extra = [
+        Parameter(
+            f"{n}.drift_rate", "drift", n, constants={"clock": "time_s", "time_constant": 1200.0}
+        )
+        for n in hexapod.actuator_names
+    ]
+    effects = [ZeroDrift(rates=tuple(rates), tau_s=1200.0, seconds_per_pose=30.0)]
+    params, res = _recover(hexapod, extra, effects)
+    assert res.converged and res.residual_rms < 1e-12
+    # readings exact to ~1e-13 m, the drift's h(t) of several hundred seconds: the rates
+    # to 1e-15 m/s (of 1e-9 to 5e-9)
+    assert np.max(np.abs(res.values[params.is_offset] - rates)) < 1e-15
+
+
+def test_noise_free_recovery_of_a_thermal_expansion(hexapod):
+    """The twin's warm-up of the leg rods (its ThermalWarmup on leg*_rod: rod and screw grow
+    by alpha dT) makes each leg (c + d) (1 + alpha dT), d its length error; with the legs'
+    temperature 20 + dT in the temperature_c column, thermal_expansion (origin 20 C) recovers
+    alpha, steel's 11.5e-6, to the d alpha dT it does not model."""
+    warm = ThermalWarmup(delta_K=8.0, tau_s=1200.0, seconds_per_pose=30.0, bodies="leg*_rod")
+    extra = [
+        Parameter(f"{n}.expansion", "thermal_expansion", n, constants={"origin": 20.0})
+        for n in hexapod.actuator_names
+    ]
+    params, res = _recover(
+        hexapod, extra, [warm], temperature=lambda k: 20.0 + warm.temperature_K(warm.time_s(k))
+    )
+    got = res.values[params.is_offset]
+    # the twin grows the whole rod, its length error d (up to 0.2 mm here) with it: the kind,
+    # a strain of the travel c, leaves d alpha dT (< 0.2 mm x 8.3e-5 = 1.7e-8 m) and takes
+    # alpha to a relative d / c (0.2 / 195 mm, 1e-3)
+    assert res.converged and res.residual_rms < 1.7e-8
+    assert np.max(np.abs(got - 11.5e-6)) < 1e-3 * 11.5e-6, got
+
+
+def test_noise_free_recovery_of_an_encoder_eccentricity(arm):
+    """The twin's eccentric encoder disc (e = 10 um at R = 30 mm, phase phi per joint) makes
+    the joint stand at theta = c - (e/R) sin(c + phi) + O((e/R)^3) (the second harmonic of
+    the reading cancels in the inversion to second order): periodic_error at harmonic 1
+    recovers -(e/R) cos(phi) (sin) and -(e/R) sin(phi) (cos) on every joint of the 6R arm."""
+    ecc = EncoderEccentricity(eccentricity_m=10e-6, radius_m=0.03, seed=5)
+    phi = ecc.phases(arm)[:, 0]
+    eps = ecc.eccentricity_m / ecc.radius_m
+    names = arm.actuator_names
+    extra = [
+        Parameter(f"{n}.ecc_{ph}", "periodic_error", n, constants={"phase": ph, "harmonic": 1})
+        for ph in ("sin", "cos")
+        for n in names
+    ]
+    params, res, model, obs, truth = _recover(arm, extra, [ecc], n=80, errors="arm6r", full=True)
+    # the disc turns with the joint from the truth's joint zero (its zero errors z included):
+    # -(e/R) sin(c - z + phi)
+    phi = phi - truth.model.qpos0[truth.actuator_qpos]
+    want = np.concatenate([-eps * np.cos(phi), -eps * np.sin(phi)])
+    got = res.values[params.is_offset]
+    # what the model leaves is the third order, (e/R)^3 = 3.7e-11 rad on the arm's ~1 m
+    assert res.converged and res.residual_rms < 1e-10
+    # readings that differ from the model's by r move an exact least-squares fit by at most
+    # |r| / s_min (s_min: the Jacobian's smallest singular value over the estimated
+    # parameters): on the arm some geometry nearly mimics a joint's first harmonic (s_min
+    # small), so the values come back to that bound, not to round-off
+    jac = model.jacobian(res.values, model.predict(res.values, obs.commands))
+    jac = jac.reshape(-1, len(params))[:, res.estimated]
+    s_min = np.linalg.svd(jac, compute_uv=False)[-1]
+    r_norm = res.residual_rms * np.sqrt(jac.shape[0])
+    assert np.max(np.abs(got - want)) <= r_norm / s_min, (
+        np.max(np.abs(got - want)),
+        r_norm / s_min,
+    )
+    assert np.max(np.abs(got - want)) < 1e-3 * eps  # and within a thousandth of e/R
 
 
 def test_offset_kinds_through_the_files(hexapod, tmp_path):

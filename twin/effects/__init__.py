@@ -31,6 +31,7 @@ from twin.effects.reflector_offset import ReflectorOffset
 from twin.effects.thermal import ThermalGrowth
 from twin.effects.thermal_warmup import ThermalWarmup
 from twin.effects.tracker_air import TrackerAirTemperature
+from twin.effects.zero_drift import ZeroDrift
 
 __all__ = [
     "ActuatorEffect",
@@ -50,6 +51,7 @@ __all__ = [
     "ThermalGrowth",
     "ThermalWarmup",
     "TrackerAirTemperature",
+    "ZeroDrift",
     "apply_actuator_effects",
     "check_effects",
     "model_at",

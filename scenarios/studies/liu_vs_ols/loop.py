@@ -11,11 +11,13 @@ fixed-point inversion of the corrected model (calib.loop.compensation), then re-
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from calib.analysis import analyse
+from calib.data import Dataset, write_dataset
 from calib.diagnosis import Diagnosis, diagnose
 from calib.fit import IdentificationResult, Observations
 from calib.loop import (
@@ -26,8 +28,10 @@ from calib.loop import (
     loop_commands,
     residual_rms_3d,
 )
+from scenarios.files_loop import loop_through_files
 from scenarios.studies.liu_vs_ols.pipeline import Bench, Calibration
 from twin.kinematics import on_one_blas_thread
+from twin.measurement import measure as twin_measure
 
 
 @dataclass(frozen=True)
@@ -131,3 +135,58 @@ def close_loop(bench: Bench, cal: Calibration, estimator: str = "ols") -> Loop:
     before = residual_rms_3d(cal.fine_measured, model.predict(values, cal.fine_commands).targets)
     floor = np.sqrt(3.0) * bench.sigma_m / np.sqrt(bench.tracker.repeats)
     return Loop(diag, fit, before * 1e3, fit.residual_rms_3d_m * 1e3, float(floor) * 1e3)
+
+
+def readings_dataset(
+    bench: Bench, cal: Calibration, test_commands: np.ndarray, seed: int
+) -> Dataset:
+    """The fine plan's readings (set ``calibration``, the very readings the loop above
+    fitted) and the test layer's nodes at the coarse settings measured next in the sequence
+    (set ``test``), as the tracker hands them over. The test readings come from a twin of
+    the machine in the same state (the fine plan's sequence run again on a generator of
+    their own, ``seed``, its readings dropped), so that the bench's clock and draws, and with
+    them every other number of the study, are untouched."""
+    nominal = bench.machine.nominal
+    n_fine, n_test = len(cal.fine_commands), len(test_commands)
+    order = np.concatenate([cal.fine_order, cal.fine_order[-1] + 1 + np.arange(n_test)])
+    commands = np.vstack([cal.fine_commands, test_commands])
+    rng = np.random.default_rng(seed)
+    m = twin_measure(
+        bench.machine.truth, commands, bench.tracker, rng, effects=bench.effects, order=order
+    )
+    readings = np.concatenate([cal.fine_measured[:, :, None, :], m.readings[n_fine:]])
+    return Dataset(
+        model=nominal.name,
+        frame="base",
+        actuator_names=nominal.actuator_names,
+        actuator_units=tuple("mm" if s else "deg" for s in nominal.actuator_is_slide),
+        target_names=nominal.target_names,
+        pose_ids=np.arange(n_fine + n_test),
+        sets=np.array(["calibration"] * n_fine + ["test"] * n_test),
+        commands=commands,
+        readings=readings,
+        order=order,
+        tracker={
+            "position_mm": [v * 1e3 for v in bench.tracker.position_m],
+            "noise": bench.tracker.noise.describe(),
+            "repeats": bench.tracker.repeats,
+        },
+    )
+
+
+def close_loop_through_files(
+    bench: Bench, cal: Calibration, test_commands: np.ndarray, out_dir: Path
+) -> dict[str, Any]:
+    """The loop as a user runs it on the polisher's readings (scenarios.files_loop)."""
+    seed = bench.scenario.get("seed", int) + 1  # the test readings' own draws
+    ds = readings_dataset(bench, cal, test_commands, seed)
+    (out_dir / "datasets").mkdir(parents=True, exist_ok=True)
+    data = write_dataset(ds, out_dir / "datasets" / "readings.csv")
+    sc = bench.scenario
+    return loop_through_files(
+        sc.resolve(sc.get("model", str), "model"),
+        sc.resolve(sc.get("error_model", str), "error_model"),
+        data,
+        out_dir / "loop_through_files",
+        bench.sigma_m * 1e3,
+    )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from scenarios.files_loop import files_loop_sentence
 from scenarios.studies.liu_vs_ols.sentences import (
     effects_phrase,
     estimator_parameters,
@@ -178,6 +179,9 @@ def _loop(s: dict[str, Any]) -> list[str]:
     ]
     for n, v in lp["coefficients"].items():
         lines.append(f"| {n} | {v:.4g} | {lp['coefficient_std'].get(n, float('nan')):.2g} |")
+    through = files_loop_sentence(s.get("loop_through_files"))
+    if through:  # the fine readings and the test layer's, handed over as a Dataset file
+        lines += ["", "The fine readings and the test layer's nodes as a Dataset file: " + through]
     return [*lines, ""]
 
 

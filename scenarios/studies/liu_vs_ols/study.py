@@ -33,7 +33,7 @@ from calib.compensate import TwistCompensation
 from scenarios.config import Scenario
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
-from scenarios.studies.liu_vs_ols.loop import close_loop
+from scenarios.studies.liu_vs_ols.loop import close_loop, close_loop_through_files
 from scenarios.studies.liu_vs_ols.noise import display_scale, eta_at_used, monte_carlo
 from scenarios.studies.liu_vs_ols.pipeline import (
     CONTROL,
@@ -185,6 +185,10 @@ def run(
     sigma_ols, sigma_liu = spread["ols"], spread["liu"]
     eta_used = eta_at_used(estimates, display_scale(params, problem.columns), bench.sigma_m)
 
+    progress.step("the loop through the files: diagnose --out, identify --with, verify")
+    through = close_loop_through_files(bench, cal, cmds["test"]["coarse"], out_dir)
+    progress.note(f"exit codes {through['exit_codes']}, {through['runtime_s']:.1f} s")
+
     liu_est = estimates.get("liu", (None,))[0]
     control_um = order_control_um(layers)
     summary: dict[str, Any] = {
@@ -239,6 +243,7 @@ def run(
         "paper_match": paper_match(layers),
         "orientation_reach": orientation_check(comps["test"].twist_jacobians, params, layers),
         "loop": loop.summary(),
+        "loop_through_files": through,
         "draws": draws_reference(out_dir),
         "regime": regime_reference(out_dir),
         "regime_geometry": regime_reference(out_dir, REGIME_GEOMETRY),

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from scenarios.files_loop import files_loop_sentence
+
 
 def report(s: dict[str, Any]) -> str:
     lines = [
@@ -62,4 +64,9 @@ def report(s: dict[str, Any]) -> str:
             f"{v['ori_max_deg']:.5f} | {v['ori_mean_deg']:.5f} |"
         )
     lines.append("")
+    through = files_loop_sentence(
+        s.get("loop_through_files"), s.get("test_3d", {}).get("after", {}).get("rms_mm")
+    )
+    if through:
+        lines += [through, ""]
     return "\n".join(lines)

@@ -19,6 +19,7 @@ from calib.analysis import max_mean_stats, pose_errors_between
 from calib.diagnosis import diagnose, effect_offsets, effect_target_shifts, save_diagnosis_png
 from calib.fit import CalibrationModel, bind_dataset, identify
 from scenarios.config import Scenario
+from scenarios.files_loop import loop_through_files
 from scenarios.loop_figures import effect_plots
 from scenarios.machine_setup import build_effects, load_machine
 from scenarios.progress import Progress
@@ -156,7 +157,16 @@ def run(
             "before": max_mean_stats(pose_errors_between(local, before_pred, test.measured)),
             "after": max_mean_stats(pose_errors_between(local, after_pred, test.measured)),
         },
-        "runtime_s": time.perf_counter() - t0,
     }
+    progress.step("the same loop through the files: diagnose --out, identify --with, verify")
+    summary["loop_through_files"] = loop_through_files(
+        scenario.resolve(scenario.get("model", str), "model"),
+        scenario.resolve(scenario.get("error_model", str), "error_model"),
+        out_dir / "datasets" / "calibration.csv",
+        out_dir / "loop_through_files",
+        sigma * 1e3,
+        test_data=out_dir / "datasets" / "test.csv",
+    )
+    summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report(scenario.study, summary)
     return summary
