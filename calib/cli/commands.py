@@ -55,7 +55,6 @@ import calib.cli.export as cmd_export
 import calib.cli.plan as cmd_plan
 import calib.cli.verify_day as verify_day
 import calib.cli.verify_iso as verify_iso
-from calib.cli.verify_correction import with_correction
 from calib.cli.common import (
     identify_exit_code,
     positive_int,
@@ -66,6 +65,7 @@ from calib.cli.common import (
     sigma_float,
 )
 from calib.cli.diagnose import cmd_diagnose
+from calib.cli.verify_correction import with_correction
 from calib.correction import correction_in_file
 from calib.data import DatasetError, load_result, read_dataset, result_text, sidecar_path
 from calib.exceptions import CalibError
