@@ -36,8 +36,7 @@ every target, the directions else from the program's own sequence (calib.compens
 which it used is said, a missing one refused by name.
 
 With ``--diagnosis D.json`` the machine compensated is the identified one with the effect the
-diagnosis named: the result must be the one ``identify --with D.json`` wrote; a result fitted
-without it is refused with that advice rather than combined with the diagnosis's estimate.
+diagnosis named: the result must be the one ``identify --with D.json`` wrote (others refused).
 A result's residual correction is applied inside its calibrated region (the others listed).
 """
 
