@@ -69,7 +69,9 @@ def with_residual_correction(
         f"{int(comp.reachable.sum())} reachable poses (predictive std median "
         f"{np.nanmedian(std[inside]) * 1e3 if inside.any() else 0.0:.4f} mm per coordinate); "
         f"{len(outside)} outside the calibrated region, uncorrected"
-        + (f": pose_id {', '.join(outside[:20])}" if outside else "")
+        + (f": pose_id {', '.join(outside[:20])}" if outside else ""),
+        "predicted residual at the written commands with the correction: max "
+        f"{np.nanmax(residual, initial=0.0) * 1e3:.3g} mm at the tool point",
     ]
     entry = {
         "applied": [str(p) for p, i in zip(comp.pose_ids, inside, strict=True) if i],

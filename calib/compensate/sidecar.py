@@ -102,18 +102,21 @@ def missing_line(model_path: str | Path) -> str | None:
         content = json.loads(path.read_text(encoding="utf-8"))
         missing = content["not_held"]
         names = [f"{m['name']} ({m['kind']}, {m['value']:.6g} {m['unit']})" for m in missing]
-        if content.get("residual_correction"):
-            names.append("the residual correction (kernel ridge, held in the sidecar)")
+        corrected = bool(content.get("residual_correction"))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         return (
             f"WARNING: {path} (what this model lacks) cannot be read ({exc}): the model may "
             "lack identified parameters"
         )
-    if not names:
+    if not names and not corrected:
         return None
+    lacks = f"{len(names)} identified parameter(s) its file cannot hold" if names else ""
+    if corrected:
+        lacks += (" and " if lacks else "") + "the result's residual correction"
     return (
-        f"WARNING: this model lacks {len(names)} identified parameter(s) its file cannot hold "
-        f"(listed in {path.name}): {', '.join(names)}; scored as it is, it predicts without "
+        f"WARNING: this model lacks {lacks} (listed in {path.name})"
+        + (f": {', '.join(names)}" if names else "")
+        + "; scored as it is, it predicts without "
         f"them (verify --model {content.get('nominal_model', 'NOMINAL.xml')} --errors E.toml "
         f"--result {content.get('result', 'R.json')} scores the whole result)"
     )

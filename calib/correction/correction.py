@@ -92,6 +92,21 @@ class ResidualCorrection:
             "distance": distance,
         }
 
+    def predict_held_out(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """As :meth:`predict`, but a pose that is one of those carrying the correction gets
+        the correction fitted without it (leave-one-out): what holding the correction in a
+        refit of the same poses may use, or its in-sample fit (which interpolates them)
+        would leave the refit nothing but noise to see."""
+        out = self.predict(x)
+        z = self.kr.standardise(x)
+        loo = None
+        for i in np.flatnonzero(out["distance"] <= 1e-9):
+            if loo is None:
+                loo = self.kr.loo_mean()
+            j = int(np.argmin(np.sum((self.kr.z_train - z[i]) ** 2, axis=1)))
+            out["mean"][i] = loo[j] if out["inside"][i] else 0.0
+        return out
+
     def to_dict(self, model_name: str) -> dict[str, Any]:
         u = _factors(self.units)
         kr = self.kr

@@ -71,9 +71,11 @@ def corrected_targets(
 
 def held_dataset(dataset, corr: ResidualCorrection, model: CalibrationModel, values, registration):
     """``dataset`` with every reading less the correction at its pose (features from the
-    model at ``values``; in the tracker frame through ``registration``), and the count of
-    poses inside the calibrated region."""
-    pred = corrected_targets(corr, model, values, dataset.commands)
+    model at ``values``; in the tracker frame through ``registration``; at a pose that
+    carries the correction, the correction fitted without it), and the count of poses
+    inside the calibrated region."""
+    x, _ = features_at(corr, model, values, dataset.commands)
+    pred = corr.predict_held_out(x)
     shift = pred["mean"].reshape(dataset.n_poses, dataset.n_targets, 3)
     if registration is not None:
         shift = registration.to_tracker(shift) - registration.to_tracker(np.zeros(3))

@@ -88,6 +88,15 @@ class KernelRidge:
                 std[lo : lo + BLOCK] = np.sqrt(self.signal_var * np.clip(1 - reduction, 0, 1))
         return mean, std
 
+    def loo_mean(self) -> np.ndarray:
+        """The mean (m, R) at each training pose fitted without it (a Gaussian process's
+        closed form: y_i - alpha_i / [(C + r I)^-1]_ii, with y = (C + r I) alpha)."""
+        chol = self._chol()
+        c = self.kernel(self.z_train) + self.ratio * np.eye(len(self.z_train))
+        y = c @ self.weights
+        inv_diag = np.diag(cho_solve(chol, np.eye(len(c))))
+        return y - self.weights / inv_diag[:, None]
+
     def _chol(self):
         c = self.kernel(self.z_train) + self.ratio * np.eye(len(self.z_train))
         return cho_factor(c, lower=True)
