@@ -30,8 +30,10 @@ LENGTH_SCALES = (0.1, 0.15, 0.25, 0.4, 0.6, 1.0, 1.6)
 RATIOS = (1e-3, 1e-2, 0.1, 1.0, 10.0)
 
 
-def training_subset(n: int, cap: int = MAX_TRAINING_POSES) -> np.ndarray:
-    """All of ``n`` poses up to ``cap``, else ``cap`` of them evenly spaced (deterministic)."""
+def training_subset(n: int, cap: int | None = None) -> np.ndarray:
+    """All of ``n`` poses up to ``cap`` (default MAX_TRAINING_POSES), else ``cap`` of them
+    evenly spaced (deterministic)."""
+    cap = MAX_TRAINING_POSES if cap is None else cap
     if n <= cap:
         return np.arange(n)
     return np.unique(np.linspace(0, n - 1, cap).round().astype(int))
