@@ -46,11 +46,15 @@ def with_residual_correction(
     first, desired = comp, comp.positions
     nominal = SolvedPoses(comp.nominal_commands, comp.nominal_qpos, comp.problems)
     shift, inside, _ = _tool_shift(machine, corr, comp.commands)
+    lost = np.zeros(len(desired), bool)
     for _ in range(ROUNDS):
-        comp = compensate_frames(
-            machine, comp.pose_ids, comp.rotations, desired - shift, nominal, skip=comp.problems
+        new = compensate_frames(
+            machine, comp.pose_ids, comp.rotations, desired - shift, nominal, skip=first.problems
         )
+        lost |= first.reachable & ~new.reachable
+        comp = _merge(first, new, lost)
         shift, inside, std = _tool_shift(machine, corr, comp.commands)
+        shift[lost], inside[lost] = 0.0, False
     joints = machine.joints_for_commands(comp.commands)
     _, pos = _tool_at(machine.mechanism, joints, comp.nominal_qpos)
     residual = np.linalg.norm(pos + shift - desired, axis=1)
@@ -62,21 +66,48 @@ def with_residual_correction(
         nominal_reflector_error_m=first.nominal_reflector_error_m,
     )
     outside = [
-        str(p) for p, i, r in zip(comp.pose_ids, inside, comp.reachable, strict=True) if r and not i
+        str(p)
+        for p, i, r, k in zip(comp.pose_ids, inside, comp.reachable, lost, strict=True)
+        if r and not i and not k
     ]
+    missed = [str(p) for p, k in zip(comp.pose_ids, lost, strict=True) if k]
     lines = [
         f"residual correction applied at {int((inside & comp.reachable).sum())} of "
         f"{int(comp.reachable.sum())} reachable poses (predictive std median "
         f"{np.nanmedian(std[inside]) * 1e3 if inside.any() else 0.0:.4f} mm per coordinate); "
         f"{len(outside)} outside the calibrated region, uncorrected"
         + (f": pose_id {', '.join(outside[:20])}" if outside else ""),
+        (
+            f"{len(missed)} pose(s) the solve with the correction did not reach, written "
+            f"uncorrected: pose_id {', '.join(missed)}"
+            if missed
+            else None
+        ),
         "predicted residual at the written commands with the correction: max "
         f"{np.nanmax(residual, initial=0.0) * 1e3:.3g} mm at the tool point",
     ]
     entry = {
         "applied": [str(p) for p, i in zip(comp.pose_ids, inside, strict=True) if i],
         "outside_calibrated_region": outside,
+        "not_reached_with_correction": missed,
         "std_mm_per_coordinate": [None if np.isnan(s) else float(s * 1e3) for s in std],
         "tool_point_correction_mm": (shift * 1e3).tolist(),
     }
     return comp, lines, entry
+
+
+def _merge(first: Compensation, comp: Compensation, lost: np.ndarray) -> Compensation:
+    """``comp`` with the first solve's rows where ``lost`` (the solve with the correction
+    failed where the first did not)."""
+    if not lost.any():
+        return comp
+    problems = tuple(
+        f if k else c for f, c, k in zip(first.problems, comp.problems, lost, strict=True)
+    )
+    return replace(
+        comp,
+        commands=np.where(lost[:, None], first.commands, comp.commands),
+        problems=problems,
+        residual_m=np.where(lost, first.residual_m, comp.residual_m),
+        residual_rad=np.where(lost, first.residual_rad, comp.residual_rad),
+    )
