@@ -39,13 +39,14 @@ def table_lines(rows: list[dict], where: str, effect: str) -> list[str]:
     """The table as printed lines."""
     label = {"effect": f"effect ({effect})"}
     out = [f"share of the nominal mean square each stage removed ({where}):"]
-    out.append(f"  {'stage':34s} {'3D RMS mm':>10s} {'removed':>9s}")
+    width = max(34, len(effect) + 10)
+    out.append(f"  {'stage':{width}s} {'3D RMS mm':>10s} {'removed':>9s}")
     for r in rows:
         name = label.get(r["stage"], r["stage"])
         share = "" if r["stage"] == "nominal" else f"{r['share_percent']:8.2f}%"
         if r["stage"] == "left":
             name = "left (not removed)"
-        out.append(f"  {name:34s} {r['rms_mm']:10.4f} {share:>9s}")
+        out.append(f"  {name:{width}s} {r['rms_mm']:10.4f} {share:>9s}")
     return out
 
 
@@ -64,7 +65,7 @@ def save_stages_png(rows: list[dict], path: str | Path, title: str) -> Path:
     for bar, r in zip(bars, stages, strict=True):
         text = f"{r['rms_mm']:.3g} mm"
         if r["stage"] != "nominal":
-            text += f"\n-{r['share_percent']:.1f}%"
+            text += f"\nremoved {r['share_percent']:.2f}%"
         ax.annotate(
             text,
             (bar.get_x() + bar.get_width() / 2, bar.get_height()),
@@ -72,8 +73,9 @@ def save_stages_png(rows: list[dict], path: str | Path, title: str) -> Path:
             va="bottom",
             fontsize=8,
         )
-    ax.set_yscale("log")
     ax.set_ylabel("3D position error per reading, RMS (mm)")
+    ax.set_ylim(0, 1.15 * max(values))
+    ax.set_xlabel("stage (share: of the nominal mean square, removed by the stage)")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     path = Path(path)
