@@ -20,6 +20,7 @@ import numpy as np
 
 from calib.correction.correction import CorrectionFileError, ResidualCorrection, pose_features
 from calib.fit.model import CalibrationModel
+from twin.kinematics.structure import on_one_blas_thread
 
 KEY = "residual_correction"
 
@@ -59,6 +60,7 @@ def features_at(
     return pose_features(commands, targets.mean(axis=1) if corr.with_position else None), targets
 
 
+@on_one_blas_thread
 def corrected_targets(
     corr: ResidualCorrection, model: CalibrationModel, values: np.ndarray, commands: np.ndarray
 ) -> dict[str, np.ndarray]:
@@ -69,6 +71,7 @@ def corrected_targets(
     return {**pred, "targets": targets + pred["mean"].reshape(targets.shape)}
 
 
+@on_one_blas_thread
 def held_dataset(dataset, corr: ResidualCorrection, model: CalibrationModel, values, registration):
     """``dataset`` with every reading less the correction at its pose (features from the
     model at ``values``; in the tracker frame through ``registration``; at a pose that

@@ -1,4 +1,5 @@
-"""Whether a residual correction is offered: fitted, cross-validated, guarded, judged.
+"""Whether a residual correction is offered: fitted, cross-validated, guarded, judged (on one
+BLAS thread, as the diagnosis: the same digits whatever the machine's thread count).
 
 The correction is fitted to what the geometry and the named effects leave (physics first)
 on the calibration poses whose readings were all kept, its length scale and regularisation
@@ -21,6 +22,7 @@ import numpy as np
 
 from calib.correction.correction import ResidualCorrection, guard_radius
 from calib.correction.kernel_ridge import cross_validate, fit_kernel_ridge
+from twin.kinematics.structure import on_one_blas_thread
 
 
 def stats(e: np.ndarray) -> dict[str, float]:
@@ -45,6 +47,7 @@ class Offer:
     test_inside: np.ndarray | None = None
 
 
+@on_one_blas_thread
 def fit_and_judge(
     x: np.ndarray,
     residual: np.ndarray,
