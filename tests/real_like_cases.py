@@ -245,3 +245,42 @@ def hexapod_reflectors(
     path = out_dir / "hexapod_reflectors.csv"
     data = _write(truth, commands, n_cal, tracker, effects, sigma_mm, path, rng)
     return Case(model, errors, data, sigma_mm, {"reflector_offsets_m": offsets})
+
+
+def coupled_arm(
+    out_dir: Path,
+    seed: int = 11,
+    n_cal: int = 400,
+    n_inside: int = 100,
+    n_outside: int = 10,
+    region: float = 0.5,
+) -> Case:
+    """A 6R arm (three reflectors, tracker frame) whose joints deflect with the configuration
+    (twin.effects.CrossCoupling: an effect no candidate of the diagnosis has), calibrated in
+    a region (``region`` of each joint's range about its middle); the test rows: ``n_inside``
+    poses in the region, then ``n_outside`` with every joint beyond it (a configuration the
+    calibration never saw). ``truth['outside']``: the pose_ids of the latter."""
+    from twin.effects import CrossCoupling
+
+    model, errors = MODELS / "arm6r_3targets.xml", MODELS / "arm6r_3targets.params.toml"
+    rng = np.random.default_rng(seed)
+    nominal = Mechanism.from_xml(model)
+    params = load_parameter_set(errors, nominal.model)
+    truth = nominal.with_model(params.inject(nominal.model, _uniform(rng, params, 0.3, 0.03)))
+    tracker = Tracker(
+        position_m=(4.0, 2.0, 0.4),
+        noise=TrackerNoise.from_spec("gaussian 10 um"),
+        rotation_rpy_rad=tuple(np.radians([0.4, -0.7, 100.0])),
+    )
+    lo, hi = nominal.actuator_range.T
+    mid, half = (lo + hi) / 2, (hi - lo) / 2
+    inside = rng.uniform(mid - region * half, mid + region * half, (n_cal + n_inside, 6))
+    # beyond the region in every joint: between 1.3 and 1.6 times its half-width from the middle
+    sign = rng.choice([-1.0, 1.0], (n_outside, 6))
+    outside = mid + sign * rng.uniform(1.3, 1.6, (n_outside, 6)) * region * half
+    commands = np.vstack([inside, outside])
+    out_dir.mkdir(parents=True, exist_ok=True)
+    physics = [CrossCoupling(magnitude_rad=float(np.radians(0.08)), seed=seed)]
+    data = _write(truth, commands, n_cal, tracker, physics, 0.02, out_dir / "coupled.csv", rng)
+    ids = list(range(n_cal + n_inside + 1, n_cal + n_inside + n_outside + 1))
+    return Case(model, errors, data, 0.02, {"outside": ids})

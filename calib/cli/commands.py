@@ -65,6 +65,8 @@ from calib.cli.common import (
     sigma_float,
 )
 from calib.cli.diagnose import cmd_diagnose
+from calib.cli.verify_correction import with_correction
+from calib.correction import correction_in_file
 from calib.data import DatasetError, load_result, read_dataset, result_text, sidecar_path
 from calib.exceptions import CalibError
 from calib.fit import (
@@ -159,6 +161,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
         added = [parameter_entry(p) for p in run.model.params.parameters if p.name not in base]
         if added:
             content["added_parameters"] = added
+        if args.with_effect:  # the residual correction held in the fit, for its users
+            held = correction_in_file(args.with_effect, run.model)
+            if held is not None:
+                content["residual_correction"] = held.to_dict(run.model.nominal.name)
         write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
 
@@ -205,6 +211,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     print(v.note)
     for side in ("before", "after"):
         print(getattr(v, side).line(f"{side:6s}"))
+    corrected = with_correction(model, loaded, dataset, args.set, v.after.as_dict())
     if args.iso9283:  # the ISO report is what --out then writes
         content = {"result": str(args.result), "data": str(args.data), "set": args.set}
         values = loaded.values_for(model.params)
@@ -217,7 +224,14 @@ def cmd_verify(args: argparse.Namespace) -> int:
         content = {"result": str(args.result), "data": str(args.data), "set": args.set}
         write_files(  # the three files together, or none of them
             {
-                out: json_text({**content, **v.as_dict(), "selection": selection}),
+                out: json_text(
+                    {
+                        **content,
+                        **v.as_dict(),
+                        "selection": selection,
+                        **({"residual_correction": corrected} if corrected else {}),
+                    }
+                ),
                 out.with_suffix(".csv"): _csv_text(v.rows()),
                 out.with_suffix(".png"): lambda tmp: save_verification_png(v, tmp),
             },

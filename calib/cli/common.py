@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 
+from calib.correction import correction_in_file, held_dataset
 from calib.data import CalibrationResult, Dataset, read_dataset
 from calib.fit import (
     EXIT_BAD_INPUT,
@@ -89,8 +90,11 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
     model = model_from_files(args.model, args.errors)
     base = model
     effect = getattr(args, "with_effect", None)
+    correction = None
     if effect:  # the effect a diagnosis named, as parameters of the error model
-        model = extended_model(model, load_effect(effect, model)["added_parameters"], effect)
+        correction = correction_in_file(effect, model)
+        block = load_effect(effect, model, allow_empty=correction is not None)
+        model = extended_model(model, block["added_parameters"], effect)
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
     options = {
         "set_name": args.set,
@@ -102,12 +106,29 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
         "regularise": not getattr(args, "plain", False),
     }
     try:
+        if correction is not None:  # the diagnosis's residual correction, held in the fit
+            dataset = _held(base, dataset, correction, options, effect)
         start = None
-        if effect:
+        if model.n_parameters > base.n_parameters:
             start, model = _geometric_start(base, model, dataset, options, effect)
         return calibrate(model, dataset, start=start, **options)
     except FitFailed as exc:
         return failed(exc)
+
+
+def _held(base: CalibrationModel, dataset: Dataset, correction, options: dict, where: str):
+    """``dataset``'s readings less the residual correction of the diagnosis ``where`` at
+    each pose (its features from the geometric fit; said)."""
+    geo = calibrate(base, dataset, **{**options, "max_ratio": None})
+    held, inside = held_dataset(
+        dataset, correction, geo.model, geo.result.values, geo.result.registration
+    )
+    print(
+        f"residual correction of {where} held: the readings less it at {inside} of "
+        f"{dataset.n_poses} poses (the others outside the calibrated region), the geometry"
+        " and any named effect refitted to what is left"
+    )
+    return held
 
 
 def _geometric_start(

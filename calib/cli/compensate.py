@@ -2,16 +2,15 @@
 
     python -m calib compensate --model M.xml --errors E.toml --result R.json
                                --commands program.csv --out corrected.csv
-    python -m calib compensate --model M.xml --errors E.toml --result R.json
-                               --poses desired.csv [--commands program.csv | --seed A1=0,...]
-                               --out commands.csv [--frame base|tracker]
-                               [--diagnosis D.json] [--force]
+    python -m calib compensate --model M.xml --errors E.toml --result R.json --poses desired.csv
+        [--commands program.csv | --seed A1=0,...] --out commands.csv [--frame base|tracker]
+        [--diagnosis D.json] [--force]
 
 ``--commands``: a robot's program (calib.data.program: ``pose_id`` and the Dataset's
-``cmd:<actuator>`` columns in mm or deg; a Dataset CSV is one too, its other columns
-ignored). Each target becomes the commands that put the identified machine's tool frame,
-position and orientation, where the nominal model puts it at the program's commands,
-solved from the program's own configuration (the same branch; calib.compensate.program).
+``cmd:<actuator>`` columns in mm or deg; a Dataset CSV is one too, other columns ignored).
+Each target becomes the commands that put the identified machine's tool frame, position and
+orientation, where the nominal model puts it at the program's commands, solved from the
+program's own configuration (the same branch; calib.compensate.program).
 
 ``--poses``: desired tool poses (calib.data.desired_poses: ``pose_id,x_mm,y_mm,z_mm[,rx_deg,
 ry_deg,rz_deg]``), in the machine's base frame or, with ``--frame tracker``, in the tracker's
@@ -33,13 +32,12 @@ A result whose error model reads the state at each target (a backlash: the appro
 direction; a thermal growth or drift: the time; a thermal expansion: the temperature) is
 compensated at the state the program will run at: the program's ``dir:<actuator>``,
 ``order``, ``time_s``, ``temperature_c`` columns, else ``--time-s`` / ``--temperature-c`` for
-every target, the directions else from the program's own sequence
-(calib.compensate.run_state); which it used is said, a missing one refused by name.
+every target, the directions else from the program's own sequence (calib.compensate.run_state);
+which it used is said, a missing one refused by name.
 
 With ``--diagnosis D.json`` the machine compensated is the identified one with the effect the
-diagnosis named: the result must be the one ``identify --with D.json`` wrote (geometry and
-effect fitted together, the effect's parameters among the result's); a result fitted without
-it is refused with that advice rather than combined with the diagnosis's own estimate.
+diagnosis named: the result must be the one ``identify --with D.json`` wrote (others refused).
+A result's residual correction is applied inside its calibrated region (the others listed).
 """
 
 from __future__ import annotations
@@ -66,6 +64,7 @@ from calib.compensate import (
     nominal_targets,
     run_state,
     solve_each,
+    with_residual_correction,
 )
 from calib.data import (
     DesiredPoses,
@@ -433,8 +432,11 @@ def run(args: argparse.Namespace) -> int:
             _residual_line(comp, "the program's own commands", where),
             f"largest change from the program: {moved}" if moved else None,
         ]
+    comp, said, corrected = with_residual_correction(machine, comp)  # the result's, if any
+    inputs.update({"residual_correction": corrected} if corrected else {})
     out = Path(args.out)
     text = commands_csv(machine, comp, labels)
+    lines += said
     inputs["nominal_error_frame"] = where
     side = json_text(sidecar(machine, comp, inputs, program=not args.poses))
     write_files({out: text, out.with_suffix(".json"): side}, make_parents=True)  # both, or neither

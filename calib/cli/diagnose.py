@@ -176,6 +176,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                 f"test {side:6s}: 3D position error per reading RMS {t['rms_mm']:.4f} mm, "
                 f"mean {t['mean_mm']:.4f} mm, max {t['max_mm']:.4f} mm"
             )
+    from calib.cli.diagnose_correction import correction_stage
+
+    added, figure = correction_stage(run, obs, diag, test)
     if args.out:
         out = Path(args.out)
         content = {
@@ -204,7 +207,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                 side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
                 for side in ("before", "after")
             }
-        files: dict = {}
+        content.update(added)
+        files: dict = figure(out) if added else {}
         if diag.plot is not None:
             from calib.diagnosis import save_diagnosis_png
 

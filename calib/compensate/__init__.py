@@ -30,6 +30,7 @@ __all__, __getattr__, __dir__ = face(
             "compensate",
             "solve_each",
         ),
+        "residual": ("with_residual_correction",),
         "program_state": (
             "RunStateError",
             "run_state",

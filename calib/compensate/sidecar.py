@@ -6,7 +6,9 @@ compliance today; any kind an MJCF has no attribute for), is listed in the sidec
 kind, element, value and unit and why the model cannot hold it, together with the result it
 came from and whether the result had a tracker registration (never part of a model). The
 sidecar is written with the model, every time (so that no earlier export's sidecar outlives
-it). ``verify --model M_cal.xml`` reads it and says in its first line what the model lacks:
+it), and the result's residual correction (calib.correction) in full, which a user's
+controller adds to the model's prediction inside its calibrated region. ``verify --model
+M_cal.xml`` reads it and says in its first line what the model lacks:
 scored as it is, the model predicts without those parameters.
 """
 
@@ -77,6 +79,9 @@ def sidecar_text(
         "result": str(machine.result.path),
         "held_in_model": held,
         "not_held": missing,
+        # the result's residual correction (calib.correction), which no model file holds:
+        # the model's prediction plus it, inside its calibrated region, is the calibration's
+        "residual_correction": machine.result.data.get("residual_correction"),
         "tracker_registration": (
             None
             if machine.registration is None
@@ -97,16 +102,21 @@ def missing_line(model_path: str | Path) -> str | None:
         content = json.loads(path.read_text(encoding="utf-8"))
         missing = content["not_held"]
         names = [f"{m['name']} ({m['kind']}, {m['value']:.6g} {m['unit']})" for m in missing]
+        corrected = bool(content.get("residual_correction"))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         return (
             f"WARNING: {path} (what this model lacks) cannot be read ({exc}): the model may "
             "lack identified parameters"
         )
-    if not names:
+    if not names and not corrected:
         return None
+    lacks = f"{len(names)} identified parameter(s) its file cannot hold" if names else ""
+    if corrected:
+        lacks += (" and " if lacks else "") + "the result's residual correction"
     return (
-        f"WARNING: this model lacks {len(names)} identified parameter(s) its file cannot hold "
-        f"(listed in {path.name}): {', '.join(names)}; scored as it is, it predicts without "
+        f"WARNING: this model lacks {lacks} (listed in {path.name})"
+        + (f": {', '.join(names)}" if names else "")
+        + "; scored as it is, it predicts without "
         f"them (verify --model {content.get('nominal_model', 'NOMINAL.xml')} --errors E.toml "
         f"--result {content.get('result', 'R.json')} scores the whole result)"
     )

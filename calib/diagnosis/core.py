@@ -124,6 +124,9 @@ class Diagnosis:
     plot: dict | None = None  # the residual against the variable that explains it
     time_origin: float = 0.0
     time_unit: str = "pose"
+    # what the named effects (or the geometry alone) leave, per pose, for a residual
+    # correction after them (calib.correction): see _leftover
+    leftover: dict | None = None
 
 
 def _time(order, time_s, n) -> tuple[np.ndarray, str]:
@@ -265,6 +268,7 @@ def diagnose(
             )
         return Diagnosis(
             **common,
+            leftover=_leftover(prob, ctx, ev, chosen, tr, tctx, fold_sets, keep),
             chosen="+".join(names),
             reason=reason,
             geometry_correction=ev.fit.beta[:p],
@@ -301,6 +305,7 @@ def diagnose(
         held = common["heldout"][f"kernel({best_group})"]
         return Diagnosis(
             **common,
+            leftover=_leftover(prob, ctx, base, [], tr, tctx, fold_sets, keep),
             chosen=f"unexplained: correlated with {best_group}",
             reason=(
                 f"{physical_sentence(base, singles, min_gain)}, but a kernel correction "
@@ -327,7 +332,39 @@ def diagnose(
         best = min(singles.values(), key=lambda e: e.heldout_rms_mm())
         if best.names and best.names[0] in sel.why_not:
             reason += f" (closest: {best.names[0]}, {sel.why_not[best.names[0]]})"
-    return Diagnosis(**common, chosen=chosen, reason=reason, notes=tuple(notes), test=test_block)
+    return Diagnosis(
+        **common,
+        leftover=_leftover(prob, ctx, base, [], tr, tctx, fold_sets, keep),
+        chosen=chosen,
+        reason=reason,
+        notes=tuple(notes),
+        test=test_block,
+    )
+
+
+def _leftover(prob, ctx, ev, chosen, tr, tctx, fold_sets, keep) -> dict:
+    """The residual (N, R) the geometry correction and the named effects of ``ev`` leave on
+    the calibration poses (and the test poses' when given), with each pose's commands, tool
+    position (mean of its targets), fold of the blocked scheme and whether all its rows
+    were kept: what a residual correction after them is fitted to and judged on."""
+    e = prob.r - prob.geo @ ev.fit.beta
+    if chosen:
+        xs = [c.design(ctx, s) for c, s in zip(chosen, ev.shapes, strict=True)]
+        e = e - np.concatenate(xs, axis=2) @ ev.fit.theta
+    out = {
+        "residual": e * keep,
+        "commands": ctx.commands,
+        "position": ctx.targets.mean(axis=1),
+        "labels": fold_sets["blocked"],
+        "complete": keep.all(axis=1),
+        "named": bool(chosen),
+    }
+    if tctx is not None:
+        out["test_residual"] = test_after(tr, tctx, chosen, ev)
+        out["test_commands"] = tctx.commands
+        out["test_position"] = tctx.targets.mean(axis=1)
+        out["test_before"] = tr.r
+    return out
 
 
 def _schemes(ev: Evaluation) -> str:

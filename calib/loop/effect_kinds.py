@@ -208,9 +208,10 @@ def model_for_result(model: CalibrationModel, data: dict[str, Any]) -> Calibrati
     return extended_model(model, data.get("added_parameters") or [], "the result's parameters")
 
 
-def load_effect(path: str, model: CalibrationModel) -> dict[str, Any]:
+def load_effect(path: str, model: CalibrationModel, allow_empty: bool = False) -> dict[str, Any]:
     """The ``effect`` block of a diagnosis file written by ``diagnose --out``, checked
-    against ``model``: its static parameters to add (refused when there are none)."""
+    against ``model``: its static parameters to add (refused when there are none, unless
+    ``allow_empty``: the file carries a residual correction to hold)."""
     import json
     from pathlib import Path
 
@@ -229,6 +230,8 @@ def load_effect(path: str, model: CalibrationModel) -> dict[str, Any]:
             f"{p} diagnosed model '{block.get('model')}', not '{model.nominal.name}'"
         )
     named = str(block.get("named", "none"))
+    if allow_empty and not block.get("added_parameters"):
+        return {**block, "added_parameters": []}
     if not block.get("added_parameters"):
         other = block.get("not_static") or []
         why = (

@@ -21,6 +21,7 @@ from twin.effects.base import (
     target_offsets,
     tracker_with,
 )
+from twin.effects.cross_coupling import CrossCoupling
 from twin.effects.encoder_eccentricity import EncoderEccentricity
 from twin.effects.gravity_compliance import GravityCompliance
 from twin.effects.joint_backlash import JointBacklash
@@ -37,6 +38,7 @@ __all__ = [
     "ActuatorEffect",
     "ActuatorGain",
     "Backlash",
+    "CrossCoupling",
     "Effect",
     "EncoderEccentricity",
     "GeometryEffect",

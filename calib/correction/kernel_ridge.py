@@ -1,0 +1,177 @@
+"""Kernel ridge regression (the mean of a Gaussian process) of the residual over pose features.
+
+The correction is the smallest honest implementation in numpy/scipy (scikit-learn is no
+dependency of the project, and its GaussianProcessRegressor would choose the length scale by
+the marginal likelihood, not by held-out poses): an RBF kernel
+``k(x, x') = s2 exp(-|z - z'|^2 / (2 l^2 d))`` over the features standardised by their mean
+and standard deviation on the calibration poses (z, d of them), fitted to the residual
+vectors (N, R). The mean is ``K* (C + r I)^-1 Y`` with C the kernel matrix at unit variance
+and r the noise-to-signal variance ratio; its variance per output
+``s2 (1 - k*^T (C + r I)^-1 k*)``, with s2 the maximum-likelihood signal variance of the
+chosen (l, r) (closed form: ``tr(Y^T (C + r I)^-1 Y) / (m R)``).
+
+At most ``MAX_TRAINING_POSES`` poses, evenly spaced through the calibration poses, carry the
+correction (as the diagnosis's kernel smoother does): the memory is that many squared plus
+``BLOCK`` times that many per evaluation, linear in the poses evaluated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+
+MAX_TRAINING_POSES = 1500
+BLOCK = 512  # poses evaluated at once
+# length scales, in units of the features' standard deviation (times sqrt of their count),
+# and noise-to-signal variance ratios the cross-validation chooses from
+LENGTH_SCALES = (0.1, 0.15, 0.25, 0.4, 0.6, 1.0, 1.6)
+RATIOS = (1e-3, 1e-2, 0.1, 1.0, 10.0)
+
+
+def training_subset(n: int, cap: int | None = None) -> np.ndarray:
+    """All of ``n`` poses up to ``cap`` (default MAX_TRAINING_POSES), else ``cap`` of them
+    evenly spaced (deterministic)."""
+    cap = MAX_TRAINING_POSES if cap is None else cap
+    if n <= cap:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, cap).round().astype(int))
+
+
+def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared Euclidean distances (len(a), len(b)), summed coordinate by coordinate (no
+    a.b^T product: the same digits whatever the BLAS)."""
+    d2 = np.zeros((len(a), len(b)))
+    for j in range(a.shape[1]):
+        d2 += (a[:, j, None] - b[None, :, j]) ** 2
+    return d2
+
+
+def nearest(z: np.ndarray, z_train: np.ndarray) -> np.ndarray:
+    """Distance of each row of ``z`` to its nearest row of ``z_train`` (in blocks)."""
+    out = np.empty(len(z))
+    for lo in range(0, len(z), BLOCK):
+        out[lo : lo + BLOCK] = np.sqrt(np.min(sq_dist(z[lo : lo + BLOCK], z_train), axis=1))
+    return out
+
+
+@dataclass(frozen=True)
+class KernelRidge:
+    """A fitted correction: standardised training features, weights, kernel and scaling."""
+
+    z_train: np.ndarray  # (m, d) standardised features of the poses that carry it
+    weights: np.ndarray  # (m, R) (C + r I)^-1 Y
+    length_scale: float  # l, in standardised units per sqrt(d)
+    ratio: float  # r, noise-to-signal variance ratio
+    signal_var: float  # s2, m^2
+    mean: np.ndarray  # (d,) feature means
+    scale: np.ndarray  # (d,) feature standard deviations
+
+    def standardise(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x, dtype=float) - self.mean) / self.scale
+
+    def kernel(self, z: np.ndarray) -> np.ndarray:
+        d = self.z_train.shape[1]
+        return np.exp(-0.5 * sq_dist(z, self.z_train) / (self.length_scale**2 * d))
+
+    def predict(self, x: np.ndarray, with_std: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Mean (N, R) and predictive standard deviation (N,) per output at features ``x``."""
+        z = self.standardise(x)
+        mean = np.empty((len(z), self.weights.shape[1]))
+        std = np.zeros(len(z))
+        chol = self._chol() if with_std else None
+        for lo in range(0, len(z), BLOCK):
+            k = self.kernel(z[lo : lo + BLOCK])
+            mean[lo : lo + BLOCK] = k @ self.weights
+            if chol is not None:
+                v = cho_solve(chol, k.T)
+                reduction = np.einsum("ij,ji->i", k, v)
+                std[lo : lo + BLOCK] = np.sqrt(self.signal_var * np.clip(1 - reduction, 0, 1))
+        return mean, std
+
+    def loo_mean(self) -> np.ndarray:
+        """The mean (m, R) at each training pose fitted without it (a Gaussian process's
+        closed form: y_i - alpha_i / [(C + r I)^-1]_ii, with y = (C + r I) alpha)."""
+        chol = self._chol()
+        c = self.kernel(self.z_train) + self.ratio * np.eye(len(self.z_train))
+        y = c @ self.weights
+        inv_diag = np.diag(cho_solve(chol, np.eye(len(c))))
+        return y - self.weights / inv_diag[:, None]
+
+    def _chol(self):
+        c = self.kernel(self.z_train) + self.ratio * np.eye(len(self.z_train))
+        return cho_factor(c, lower=True)
+
+
+def fit_kernel_ridge(
+    x: np.ndarray, y: np.ndarray, length_scale: float, ratio: float, mean=None, scale=None
+) -> KernelRidge:
+    """The correction of ``y`` (n, R) over features ``x`` (n, d) at a given (l, r), on at
+    most MAX_TRAINING_POSES evenly spaced poses; ``mean``/``scale`` the features' scaling
+    (default: of ``x``)."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if mean is None:
+        mean, scale = standardisation(x)
+    sub = training_subset(len(x))
+    z = (x[sub] - mean) / scale
+    d = z.shape[1]
+    c = np.exp(-0.5 * sq_dist(z, z) / (length_scale**2 * d)) + ratio * np.eye(len(z))
+    chol = cho_factor(c, lower=True)
+    w = cho_solve(chol, y[sub])
+    s2 = float(np.sum(y[sub] * w)) / max(w.size, 1)
+    return KernelRidge(z, w, float(length_scale), float(ratio), s2, mean, scale)
+
+
+def standardisation(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation of each feature (a constant feature: scale 1)."""
+    mean, scale = x.mean(axis=0), x.std(axis=0)
+    return mean, np.where(scale > 0, scale, 1.0)
+
+
+@dataclass(frozen=True)
+class CrossValidation:
+    """Held-out results of every (l, r) and of the chosen one, per pose."""
+
+    sse: np.ndarray  # (len(LENGTH_SCALES), len(RATIOS)) held-out SSE over all folds
+    length_scale: float
+    ratio: float
+    before: np.ndarray  # (n, R) the residual itself
+    after: np.ndarray  # (n, R) held-out residual after the chosen correction
+    distance: np.ndarray  # (n,) standardised distance to the nearest training pose of its fold
+
+
+def cross_validate(
+    x: np.ndarray,
+    y: np.ndarray,
+    labels: np.ndarray,
+    length_scales: tuple[float, ...] = LENGTH_SCALES,
+    ratios: tuple[float, ...] = RATIOS,
+) -> CrossValidation:
+    """K-fold cross-validation over poses (``labels``: the fold of each pose, e.g. blocks of
+    the measurement order): each (l, r) fitted on the other folds and scored on the fold; the
+    eigendecomposition of each training kernel serves every ratio. The features' scaling is
+    the whole set's (a scaling, not a fit of the residual)."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    mean, scale = standardisation(x)
+    z = (x - mean) / scale
+    d = z.shape[1]
+    n_l, n_r = len(length_scales), len(ratios)
+    pred = np.zeros((n_l, n_r, *y.shape))
+    distance = np.zeros(len(z))
+    for f in np.unique(labels):
+        test = labels == f
+        tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)))]
+        zt, yt = z[tr_idx], y[tr_idx]
+        d2_tt, d2_vt = sq_dist(zt, zt), sq_dist(z[test], zt)
+        distance[test] = np.sqrt(np.min(d2_vt, axis=1))
+        for i, ls in enumerate(length_scales):
+            w, u = np.linalg.eigh(np.exp(-0.5 * d2_tt / (ls**2 * d)))
+            w = np.clip(w, 0.0, None)
+            uy = u.T @ yt
+            kv = np.exp(-0.5 * d2_vt / (ls**2 * d)) @ u
+            for j, r in enumerate(ratios):
+                pred[i, j][test] = kv @ (uy / (w + r)[:, None])
+    sse = np.sum((y[None, None] - pred) ** 2, axis=(2, 3))
+    i, j = np.unravel_index(int(np.argmin(sse)), sse.shape)
+    return CrossValidation(sse, length_scales[i], ratios[j], y, y - pred[i, j], distance)
