@@ -3,4 +3,4 @@ export`` (commands), each subcommand in its own module."""
 
 from common.face import face
 
-__all__, __getattr__, __dir__ = face(__name__, {"commands": ("main",)})
+__all__, __getattr__, __dir__ = face(__name__, {"commands": ("build_parser", "main")})

@@ -259,7 +259,7 @@ def _fit_options(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m calib",
+        prog="pkm-calib",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

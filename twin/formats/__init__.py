@@ -15,7 +15,9 @@ __all__, __getattr__, __dir__ = face(
             "build_xml",
             "exact",
         ),
-        "dh_table": ("read_dh_table",),
+        "dh_table": ("dh_table_command", "read_dh_table"),
+        "error_model": ("error_model_command",),
+        "from_urdf": ("from_urdf_command",),
         "mjcf_values": (
             "WrittenMjcf",
             "mjcf_with_values",

@@ -227,7 +227,7 @@ def read_dh_table(path: str | Path) -> DHTable:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m twin.formats.dh_table", description=__doc__.split("\n")[0]
+        prog="pkm-calib from-dh", description=__doc__.split("\n")[0]
     )
     ap.add_argument("table", help="DH table (CSV)")
     ap.add_argument("--name", required=True, help="model name: NAME.xml, NAME.params.toml")
@@ -271,6 +271,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {xml} and {toml}")
     return 0
 
+
+dh_table_command = main  # pkm-calib from-dh (pkm_calib.command)
 
 if __name__ == "__main__":
     raise SystemExit(main())

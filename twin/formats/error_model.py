@@ -143,7 +143,7 @@ def error_model_toml(mech: Mechanism, source: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m twin.formats.error_model", description=__doc__.split("\n")[0]
+        prog="pkm-calib error-model", description=__doc__.split("\n")[0]
     )
     ap.add_argument("model", help="the MJCF of the machine")
     ap.add_argument("--out", help="where to write (default: beside the model, NAME.params.toml)")
@@ -173,6 +173,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {out}: {text.count('[[parameter]]')} parameters")
     return 0
 
+
+error_model_command = main  # pkm-calib error-model (pkm_calib.command)
 
 if __name__ == "__main__":
     raise SystemExit(main())

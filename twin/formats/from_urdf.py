@@ -224,7 +224,7 @@ def convert(
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m twin.formats.from_urdf", description=__doc__.split("\n")[0]
+        prog="pkm-calib from-urdf", description=__doc__.split("\n")[0]
     )
     ap.add_argument("urdf", help="the robot's URDF")
     ap.add_argument(
@@ -254,6 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     return 0
 
+
+from_urdf_command = main  # pkm-calib from-urdf (pkm_calib.command)
 
 if __name__ == "__main__":
     raise SystemExit(main())
