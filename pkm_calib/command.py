@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 from collections.abc import Callable
 
@@ -34,15 +35,30 @@ SCENARIO_COMMANDS = {
 }
 
 
+def missing_extra(command: str) -> str | None:
+    """The first module of the scenarios extra that ``command`` needs and cannot import."""
+    needs = ("rerun", "ray") if command == "sweep" else ("rerun",)
+    for name in needs:
+        try:
+            if importlib.util.find_spec(name) is None:
+                return name
+        except (ImportError, ValueError):
+            return name
+    return None
+
+
 def scenarios_main(command: str, rest: list[str]) -> int:
     """``scenarios``'s command line, imported only now: without the extra it says which one
     to install (exit 2) instead of a traceback."""
-    argv = (["list"] if rest == ["list"] else ["run", *rest]) if command == "scenario" else None
-    argv = argv if argv is not None else ["sweep", *rest]
+    missing = missing_extra(command)
     try:
+        if missing is not None:
+            raise ModuleNotFoundError(f"No module named {missing!r}", name=missing)
         from scenarios.__main__ import main as run_scenarios
 
-        return run_scenarios(argv, prog=f"{PROG} {command}")
+        if command == "scenario":
+            return run_scenarios(["list"] if rest == ["list"] else ["run", *rest], prog=PROG)
+        return run_scenarios(["sweep", *rest], prog=PROG)
     except ModuleNotFoundError as exc:
         if (exc.name or "").split(".")[0] not in EXTRA_MODULES:
             raise

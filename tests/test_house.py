@@ -1,11 +1,12 @@
 """The house rules (docs/architecture.md), computed from the tree as it is.
 
-Floors: common < twin < calib < scenarios < bench < pkm_calib (the one command), nothing imports a floor above its own;
-no modules import each other in a circle (function-level imports count: they run too); a
-source file stays within 450 lines and a folder within 20 modules; every package's
-``__init__`` names its public face (a docstring) and exports it (``__all__``); the command
-line (calib.cli) and the scenarios reach another floor's subpackage through its face, never
-through one of its modules. models/ stands apart: its generators are scripts no floor imports.
+Floors: common < twin < calib < scenarios < bench < pkm_calib (the one command), nothing
+imports a floor above its own; no modules import each other in a circle (function-level imports
+count: they run too); a source file stays within 450 lines and a folder within 20 modules;
+every package's ``__init__`` names its public face (a docstring) and exports it (``__all__``);
+the command line (calib.cli) and the scenarios reach another floor's subpackage through its
+face, never through one of its modules. models/ stands apart: its generators are scripts no
+floor imports.
 """
 
 from __future__ import annotations

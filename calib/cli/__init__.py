@@ -1,4 +1,4 @@
-"""The command line for measured data: ``python -m calib identify|verify|diagnose|compensate|
+"""The command line for measured data: ``pkm-calib identify|verify|diagnose|compensate|
 export`` (commands), each subcommand in its own module."""
 
 from common.face import face

@@ -1,20 +1,20 @@
 """Command line for measured data (any machine: serial, parallel or hybrid).
 
-    python -m calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
-                             [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
-                             [--with D.json]
-    python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
-                             [--set test] [--register | --register-set NAME]
-                             [--iso9283] [--out V.json]
-    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
-                             [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
-    python -m calib compensate --model M.xml --errors E.toml --result R.json
-                             (--commands program.csv | --poses desired.csv [--seed ...])
-                             --out commands.csv [--frame base|tracker] [--force]
-    python -m calib export   --model M.xml --errors E.toml --result R.json
-                             --out M_calibrated.xml [--dh-out T.csv]
-    python -m calib plan     --model M.xml --errors E.toml --n N --out program.csv
-                             [--candidates FILE] [--tracker-at X,Y,Z] [--predict]
+    pkm-calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
+                       [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
+                       [--with D.json]
+    pkm-calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
+                       [--set test] [--register | --register-set NAME]
+                       [--iso9283] [--out V.json]
+    pkm-calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
+                       [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
+    pkm-calib compensate --model M.xml --errors E.toml --result R.json
+                       (--commands program.csv | --poses desired.csv [--seed ...])
+                       --out commands.csv [--frame base|tracker] [--force]
+    pkm-calib export   --model M.xml --errors E.toml --result R.json
+                       --out M_calibrated.xml [--dh-out T.csv]
+    pkm-calib plan     --model M.xml --errors E.toml --n N --out program.csv
+                       [--candidates FILE] [--tracker-at X,Y,Z] [--predict]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base

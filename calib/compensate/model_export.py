@@ -249,10 +249,10 @@ def calibrated_dh_text(machine: IdentifiedMachine, model_path: Path) -> str:
         table,
         (
             f"calibrated DH table of '{machine.nominal.name}' ({model_path.name}) with the "
-            f"errors identified in {machine.result.path.name}, written by python -m calib export",
+            f"errors identified in {machine.result.path.name}, written by pkm-calib export",
             "the joint value q is the commanded value, as before: theta (R) and d (P) include "
             "the identified encoder offsets",
-            f"generate its model: python -m twin.formats.dh_table THIS.csv --name "
+            f"generate its model: pkm-calib from-dh THIS.csv --name "
             f"{machine.nominal.name} --out-dir DIR",
             *(
                 [

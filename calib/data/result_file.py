@@ -1,9 +1,9 @@
-"""The result of ``calib identify`` as a file a user can keep, read and use again.
+"""The result of ``pkm-calib identify`` as a file a user can keep, read and use again.
 
 JSON, millimetres and degrees, written atomically (0644). It carries what was estimated and
 what was fixed (and why), standard errors, the strongest correlations, the tracker
 registration when the readings were in the tracker's frame, the residual and the verdict.
-``load_result`` reads it back for ``calib verify`` or a user's own script, and refuses a file
+``load_result`` reads it back for ``pkm-calib verify`` or a user's own script, and refuses a file
 made for another model or another error model.
 """
 

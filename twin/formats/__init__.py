@@ -1,6 +1,5 @@
 """Machine models as files: MJCF numbers and values, error models (TOML, generated for any
-MJCF), DH tables and URDF imported into MJCF (python -m
-twin.formats.dh_table|from_urdf|error_model)."""
+MJCF), DH tables and URDF imported into MJCF (pkm-calib from-dh|from-urdf|error-model)."""
 
 from common.face import face
 

@@ -1,6 +1,6 @@
 """Serial arms from their DH table (CSV): an MJCF model and its error model, one command.
 
-    python -m twin.formats.dh_table TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
+    pkm-calib from-dh TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
         [--no-target-errors] [--no-base-errors]
 
 writes ``DIR/NAME.xml`` and ``DIR/NAME.params.toml`` (atomically). ``twin.formats.dh_mjcf`` says
@@ -226,9 +226,7 @@ def read_dh_table(path: str | Path) -> DHTable:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="pkm-calib from-dh", description=__doc__.split("\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="pkm-calib from-dh", description=__doc__.split("\n")[0])
     ap.add_argument("table", help="DH table (CSV)")
     ap.add_argument("--name", required=True, help="model name: NAME.xml, NAME.params.toml")
     ap.add_argument("--out-dir", default=".", help="where to write (default: .)")
