@@ -60,6 +60,11 @@ def _cause(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
+def _temporary(target: Path, token: str) -> Path:
+    """Where the new ``target`` is written before it is swapped in."""
+    return working(target, token, "tmp")
+
+
 def _backup(target: Path, keep: Path) -> Path | None:
     """A hidden hard link (else a copy) ``keep`` of ``target`` if it exists, to restore it
     from."""
@@ -101,7 +106,7 @@ def write_set(
                 locks.append(take(folder / f".ws-{token}.lock"))
         for target, writer in zip(targets, writers, strict=True):
             current = target
-            temps.append(working(target, token, "tmp"))
+            temps.append(_temporary(target, token))
             writer(temps[-1])
             os.chmod(temps[-1], ordinary_mode())
         for target in targets:

@@ -1,12 +1,13 @@
 """A scenario's results folder, replaced whole or not at all, and what a killed run leaves.
 
 A run writes into ``<root>/.<name>.partial-XXXX``, which its process holds locked (the lock
-file ``.<name>.partial-XXXX.lock``; common.file_locks, on any OS) while it lives. When the run has finished, one swap at a time (a lock on the results root, so
-that two runs of the same scenario never interleave their renames), the folder is renamed
-``.<name>.complete-XXXX``, the previous ``<name>`` is renamed ``.<name>.old-XXXX``, the
-complete one becomes ``<name>`` and the old one is deleted. A failure at any step (a full
-disk, a read-only or immutable folder) puts back what was moved and removes the new folder:
-``<name>`` is as it was, and :class:`ResultsWriteError` says why.
+file ``.<name>.partial-XXXX.lock``; common.file_locks, on any OS) while it lives. When the run
+has finished, one swap at a time (the lock ``<root>/.<name>.lock``, so that two runs of the
+same scenario never interleave their renames), the folder is renamed ``.<name>.complete-XXXX``,
+the previous ``<name>`` is renamed ``.<name>.old-XXXX``, the complete one becomes ``<name>``
+and the old one is deleted. A failure at any step (a full disk, a read-only or immutable
+folder) puts back what was moved and removes the new folder: ``<name>`` is as it was, and
+:class:`ResultsWriteError` says why.
 
 A process killed at any point (SIGKILL, power loss) may leave an unlocked ``.partial-*``
 folder (an unfinished run), a ``.complete-*`` folder (a finished run not yet in place) or an
@@ -23,6 +24,7 @@ import os
 import secrets
 import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterator
 from datetime import datetime
 from pathlib import Path
@@ -187,13 +189,9 @@ def replaced_whole(out_dir: Path, notify: Notify = _stderr) -> Iterator[Path]:
         root.mkdir(parents=True, exist_ok=True)
         with _locked(root, out_dir.name):
             recover(out_dir, notify)
-            tmp = sibling(out_dir, PARTIAL)
-            hold = take(lock_path(tmp))  # held before the folder exists: alive, no leftover
-            try:
-                tmp.mkdir()
-            except BaseException:
-                drop(hold)
-                raise
+            # made and locked while the name is locked: no other run's recover sees it unheld
+            tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.{PARTIAL}-", dir=root))
+            hold = take(lock_path(tmp))
     except ResultsWriteError:
         raise
     except OSError as exc:
