@@ -154,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     except TwinError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from common.atomic_files import write_text_atomic  # the project's one atomic writer
+    from twin.formats.model_files import write_model_files
 
     model = Path(args.model)
     out = Path(args.out) if args.out else model.with_name(f"{model.stem}.params.toml")
@@ -167,7 +167,8 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    write_text_atomic(out, text)
+    if not write_model_files({out: text}):
+        return 2
     print(f"wrote {out}: {text.count('[[parameter]]')} parameters")
     return 0
 

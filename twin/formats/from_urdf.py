@@ -13,7 +13,11 @@ without one), a ``tool`` site (default: at the origin of the first reflector's l
 ``home`` keyframe (every joint at 0, or at the middle of a range without 0), and capsules
 between joint origins for viewing (the URDF's visual and collision meshes are left out).
 The error model is ``twin.formats.error_model``'s complete one. ``--name`` renames the model (the
-name datasets give in their ``model`` field; default: the robot's name).
+name datasets give in their ``model`` field; default: the URDF's robot name, so a dataset
+recorded under another name is refused until the model is made with ``--name`` that name).
+Existing files are not replaced without ``--force``. Refused, with the cause: a NaN or
+infinite number, a prismatic joint without ``<limit>``, a limit whose lower is above its
+upper, a chain deeper than 100 links.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import numpy as np
 from twin.exceptions import TwinError
 from twin.formats.error_model import error_model_toml
 from twin.formats.mjcf_values import exact
+from twin.formats.model_files import out_files, write_model_files
 from twin.formats.urdf_import import Urdf, UrdfError, body_of_link, read_urdf
 from twin.mechanism import Mechanism
 from twin.rotations import matrix_from_rpy, quat_from_matrix
@@ -234,21 +239,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tool", help="the commanded frame: LINK[@x,y,z[,rx,ry,rz]] (mm, deg)")
     ap.add_argument("--name", help="the model's name (default: the robot's)")
     ap.add_argument("--out-dir", required=True, help="where to write NAME.xml and NAME.params.toml")
+    ap.add_argument(
+        "--force", action="store_true", help="replace existing NAME.xml, NAME.params.toml"
+    )
     args = ap.parse_args(argv)
     try:
         xml, toml, mech = convert(args.urdf, args.target, args.tool, args.name)
+        names = [f"{mech.name}.xml", f"{mech.name}.params.toml"]
+        model_file, errors_file = out_files(args.out_dir, names, args.force)
     except TwinError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from common.atomic_files import write_text_atomic  # the project's one atomic writer
-
-    out = Path(args.out_dir)
-    model_file = write_text_atomic(out / f"{mech.name}.xml", xml)
-    errors_file = write_text_atomic(out / f"{mech.name}.params.toml", toml)
+    except RecursionError:
+        print(f"error: {args.urdf}: its tree of links is too deep to convert", file=sys.stderr)
+        return 2
+    if not write_model_files({model_file: xml, errors_file: toml}):  # both, or neither
+        return 2
     print(
         f"wrote {model_file} ({mech.n_actuators} actuators {list(mech.actuator_names)}, "
         f"{mech.n_targets} reflector(s)) and {errors_file} ({toml.count('[[parameter]]')} "
-        "parameters)"
+        f"parameters); datasets of this machine name the model '{mech.name}' (--name sets it)"
     )
     return 0
 
