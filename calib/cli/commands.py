@@ -81,7 +81,7 @@ from calib.fit import (
 )
 from calib.loop import model_for_result, parameter_entry
 from common.atomic_files import json_text
-from common.write_set import write_files
+from common.write_set import WriteSetError, write_files
 from twin.exceptions import TwinError
 
 
@@ -387,12 +387,26 @@ def check_out(args: argparse.Namespace) -> None:
                 raise ValueError(f"--out {o} would overwrite an input file: {role} ({i})")
 
 
+def os_error_text(exc: OSError, args: argparse.Namespace) -> str:
+    """A file error as a sentence with its file: a WriteSetError's own sentence, else the
+    OS's cause and file without the raw ``[Errno N]`` (no file known: the command's --out)."""
+    if isinstance(exc, WriteSetError) or not exc.strerror:
+        return str(exc)
+    if exc.filename:
+        return f"{exc.strerror}: {exc.filename}"
+    out = getattr(args, "out", None)
+    return f"{exc.strerror} (while writing {out})" if out else str(exc.strerror)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         check_out(args)
         return COMMANDS[args.command](args)
-    except (DatasetError, CalibError, TwinError, OSError, ValueError) as exc:
+    except OSError as exc:
+        print(f"error: {os_error_text(exc, args)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (DatasetError, CalibError, TwinError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -294,6 +294,11 @@ def export_model(
     try:
         tmp.write_text(written.text, encoding="utf-8")
         exported = Mechanism.from_xml(tmp)
+    except OSError as exc:  # a full disk: said with the file, not as a raw errno
+        raise ExportError(
+            f"cannot write {tmp} (the calibrated model, read back to check it): "
+            f"{exc.strerror or exc}; nothing written"
+        ) from None
     finally:
         tmp.unlink(missing_ok=True)
     check = kinematics_difference(
