@@ -25,7 +25,9 @@ from pathlib import Path
 from common.file_locks import drop, take
 
 Notify = Callable[[str], None]
-_WORKING = re.compile(r"^\..*\.ws-(?P<token>[0-9a-f]{8})\.(tmp|old)$")
+_WORKING = re.compile(
+    r"^\..*\.ws-(?P<token>[0-9a-f]{8})\.(tmp|old)(\..*)?$"
+)  # and a writer's own temporary
 _OWN = re.compile(r"^\.ws-(?P<token>[0-9a-f]{8})\.(json|json\.part|lock)$")
 
 

@@ -115,9 +115,10 @@ def write_set(
         journal = journal_text(targets, temps, backups)
         for folder in dict.fromkeys(t.parent for t in targets):  # the set, before any swap
             current = folder / f".ws-{token}.json"
-            Path(f"{current}.part").write_text(journal, encoding="utf-8")
-            os.replace(f"{current}.part", current)
-            journals.append(current)
+            journals.append(Path(f"{current}.part"))
+            journals[-1].write_text(journal, encoding="utf-8")
+            os.replace(journals[-1], current)
+            journals[-1] = current
         for i, (target, tmp) in enumerate(zip(targets, temps, strict=True)):
             current = target
             os.replace(tmp, target)
