@@ -25,9 +25,8 @@ from pathlib import Path
 from common.file_locks import drop, take
 
 Notify = Callable[[str], None]
-_WORKING = re.compile(
-    r"^\..*\.ws-(?P<token>[0-9a-f]{8})\.(tmp|old)(\..*)?$"
-)  # and a writer's own temporary
+# a new or previous file of a set, and the temporary its writer (savefig, say) made of it
+_WORKING = re.compile(r"^\..*\.ws-(?P<token>[0-9a-f]{8})\.(tmp|old)(\..*)?$")
 _OWN = re.compile(r"^\.ws-(?P<token>[0-9a-f]{8})\.(json|json\.part|lock)$")
 
 
