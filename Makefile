@@ -20,7 +20,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev]"
+	$(PY) -m pip install --quiet -e ".[dev,scenarios]"
 	$(PY) -m twin.kinematics.warm_up  # compile the kinematics kernels into numba's cache
 	touch $(STAMP)
 

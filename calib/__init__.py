@@ -1,6 +1,6 @@
 """What a user runs on readings, seeing only the nominal model: data/ -> fit/ (identify, verdict)
 -> diagnosis/ -> loop/ -> compensate/; analysis/, estimators/ and two_step/ beside; cli/ the
-commands (python -m calib)."""
+commands (pkm-calib, or python -m calib)."""
 
 from common.face import face
 

@@ -12,19 +12,27 @@ into a hidden staging folder, whose files then go in as one set.
 
 :class:`WriteSetError` (an OSError) names the file and the cause and says that the previous
 files were left as they were.
+
+A process killed midway (SIGKILL, power loss) leaves hidden working files named
+``.<file>.ws-<token>.tmp`` (new) and ``.old`` (previous), held by ``.ws-<token>.lock``; once
+every new file is written, a journal ``.ws-<token>.json`` lists the set before the first
+swap. The next :func:`write_set` into that folder finds them unheld and rolls the set
+forward (journal: every new file put in place) or back (no journal: nothing was replaced;
+the working files are deleted), and says what it did (:mod:`common.write_recovery`).
 """
 
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import os
+import secrets
 import shutil
-import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from common.atomic_files import ordinary_mode
+from common.file_locks import drop, is_free, lock_path, take
+from common.write_recovery import Notify, journal_text, recover, say, working
 
 Writer = Callable[[Path], None]
 
@@ -52,18 +60,16 @@ def _cause(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
-def _temporary(target: Path) -> Path:
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    os.close(fd)
-    return Path(tmp)
+def _temporary(target: Path, token: str) -> Path:
+    """Where the new ``target`` is written before it is swapped in."""
+    return working(target, token, "tmp")
 
 
-def _backup(target: Path) -> Path | None:
-    """A hidden hard link (else a copy) of ``target`` if it exists, to restore it from."""
+def _backup(target: Path, keep: Path) -> Path | None:
+    """A hidden hard link (else a copy) ``keep`` of ``target`` if it exists, to restore it
+    from."""
     if not target.exists():
         return None
-    keep = _temporary(target)
-    keep.unlink()
     try:
         os.link(target, keep)
     except OSError:  # a filesystem without hard links
@@ -72,28 +78,47 @@ def _backup(target: Path) -> Path | None:
 
 
 def write_set(
-    files: Mapping[str | os.PathLike[str], Writer], make_parents: bool = False
+    files: Mapping[str | os.PathLike[str], Writer],
+    make_parents: bool = False,
+    notify: Notify = say,
 ) -> list[Path]:
     """Write each ``path -> writer(tmp_path)`` of ``files`` as one set (see the module);
     returns the paths. Raises :class:`WriteSetError` with every file left as it was.
-    ``make_parents`` creates missing folders first (else a missing folder is the error)."""
+    ``make_parents`` creates missing folders first (else a missing folder is the error).
+    What a killed earlier write left in these folders is first rolled forward or back, and
+    said through ``notify``."""
     targets = [Path(p) for p in files]
     writers = list(files.values())
+    token = secrets.token_hex(4)
     temps: list[Path] = []
     backups: list[Path | None] = []
     swapped: list[int] = []
+    journals: list[Path] = []
+    locks: list = []
     current = targets[0] if targets else Path()
     try:
+        for folder in dict.fromkeys(t.parent for t in targets):
+            current = folder
+            if make_parents:
+                folder.mkdir(parents=True, exist_ok=True)
+            if folder.is_dir():
+                recover(folder, notify)
+                locks.append(take(folder / f".ws-{token}.lock"))
         for target, writer in zip(targets, writers, strict=True):
             current = target
-            if make_parents:
-                target.parent.mkdir(parents=True, exist_ok=True)
-            temps.append(_temporary(target))
+            temps.append(_temporary(target, token))
             writer(temps[-1])
             os.chmod(temps[-1], ordinary_mode())
         for target in targets:
             current = target
-            backups.append(_backup(target))
+            backups.append(_backup(target, working(target, token, "old")))
+        journal = journal_text(targets, temps, backups)
+        for folder in dict.fromkeys(t.parent for t in targets):  # the set, before any swap
+            current = folder / f".ws-{token}.json"
+            journals.append(Path(f"{current}.part"))
+            journals[-1].write_text(journal, encoding="utf-8")
+            os.replace(journals[-1], current)
+            journals[-1] = current
         for i, (target, tmp) in enumerate(zip(targets, temps, strict=True)):
             current = target
             os.replace(tmp, target)
@@ -105,12 +130,19 @@ def write_set(
                     targets[i].unlink()
                 else:
                     os.replace(backups[i], targets[i])
-        _discard(temps + [b for b in backups if b is not None])
+        _discard(temps + [b for b in backups if b is not None] + journals)
+        _unlock(locks)
         if isinstance(exc, OSError):
             raise WriteSetError(exc.errno, _message(current, targets, exc), str(current)) from None
         raise
-    _discard([b for b in backups if b is not None])
+    _discard([b for b in backups if b is not None] + journals)
+    _unlock(locks)
     return targets
+
+
+def _unlock(locks: list) -> None:
+    for held in locks:
+        drop(held)
 
 
 def _message(current: Path, targets: list[Path], exc: OSError) -> str:
@@ -123,10 +155,12 @@ def _message(current: Path, targets: list[Path], exc: OSError) -> str:
 
 
 def write_files(
-    out: Mapping[str | os.PathLike[str], str | bytes | Writer], make_parents: bool = False
+    out: Mapping[str | os.PathLike[str], str | bytes | Writer],
+    make_parents: bool = False,
+    notify: Notify = say,
 ) -> list[Path]:
     """:func:`write_set` of texts (UTF-8), bytes or writers."""
-    return write_set({p: _writer(v) for p, v in out.items()}, make_parents)
+    return write_set({p: _writer(v) for p, v in out.items()}, make_parents, notify)
 
 
 def _writer(value: str | bytes | Writer) -> Writer:
@@ -151,19 +185,21 @@ def staged(folder: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield an empty hidden folder inside ``folder`` to write files into; when the block
     ends, its files are written into ``folder`` as one set (:func:`write_set`). On any
     exception nothing in ``folder`` changes (an OSError comes out as :class:`WriteSetError`).
-    The staging folder is held locked while in use; unlocked ones, left by killed
-    processes, are removed first."""
+    The staging folder is held locked (``<stage>.lock``) while in use; unheld ones, left by
+    killed processes, are removed first."""
     target = Path(folder)
-    target.mkdir(parents=True, exist_ok=True)
-    for stale in target.glob(f"{STAGE_PREFIX}*"):
-        _remove_if_unlocked(stale)
+    held = None
     try:
-        stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=target))
+        target.mkdir(parents=True, exist_ok=True)
+        for stale in target.glob(f"{STAGE_PREFIX}*"):
+            _remove_if_unheld(stale)
+        stage = target / f"{STAGE_PREFIX}{secrets.token_hex(4)}"
+        held = take(lock_path(stage))  # held before the folder exists: never taken as stale
+        stage.mkdir()
     except OSError as exc:
+        drop(held)
         raise WriteSetError(exc.errno, _staged_message(target, exc), str(target)) from None
-    hold = os.open(stage, os.O_RDONLY | os.O_DIRECTORY)
     try:
-        fcntl.flock(hold, fcntl.LOCK_EX | fcntl.LOCK_NB)
         try:
             yield stage
         except OSError as exc:
@@ -173,7 +209,7 @@ def staged(folder: str | os.PathLike[str]) -> Iterator[Path]:
         write_set({target / p.name: _mover(p) for p in sorted(stage.iterdir()) if p.is_file()})
     finally:
         shutil.rmtree(stage, ignore_errors=True)
-        os.close(hold)
+        drop(held)
 
 
 def _staged_message(folder: Path, exc: OSError) -> str:
@@ -184,15 +220,17 @@ def _mover(src: Path) -> Writer:
     return lambda tmp: os.replace(src, tmp)
 
 
-def _remove_if_unlocked(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
-    except OSError:
+def _remove_if_unheld(path: Path) -> None:
+    """A killed process's staging folder (or the lock file it left): removed when no live
+    process holds its lock."""
+    if path.name.endswith(".lock"):
+        if not path.with_suffix("").exists():
+            with contextlib.suppress(OSError):
+                if is_free(path):
+                    path.unlink()
         return
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
+    held = take(lock_path(path))
+    if held is None:
         return  # in use by a live process
-    finally:
-        os.close(fd)
     shutil.rmtree(path, ignore_errors=True)
+    drop(held)

@@ -32,8 +32,8 @@ def _os_message(exc: OSError) -> str:
     return describe_os_error(exc)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m scenarios", description=__doc__)
+def main(argv: list[str] | None = None, prog: str = "python -m scenarios") -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser(
         "run", help="run a scenario by name (scenarios/studies/<study>/<name>.toml) or path"

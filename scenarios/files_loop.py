@@ -27,7 +27,7 @@ def _run(args: list[str], log: io.StringIO, said: dict[str, str]) -> int:
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
         code = calib_main(args)
-    log.write(f"$ python -m calib {' '.join(args)}\n{out.getvalue()}exit {code}\n\n")
+    log.write(f"$ pkm-calib {' '.join(args)}\n{out.getvalue()}exit {code}\n\n")
     if code != 0:
         lines = [x.strip() for x in out.getvalue().splitlines() if x.strip()]
         why = [x for x in lines if x.startswith(("FAILED", "error"))] or lines[-1:]

@@ -1,12 +1,13 @@
 """A scenario's results folder, replaced whole or not at all, and what a killed run leaves.
 
-A run writes into ``<root>/.<name>.partial-XXXX``, which its process holds locked (``flock``)
-while it lives. When the run has finished, one swap at a time (a lock on the results root, so
-that two runs of the same scenario never interleave their renames), the folder is renamed
-``.<name>.complete-XXXX``, the previous ``<name>`` is renamed ``.<name>.old-XXXX``, the
-complete one becomes ``<name>`` and the old one is deleted. A failure at any step (a full
-disk, a read-only or immutable folder) puts back what was moved and removes the new folder:
-``<name>`` is as it was, and :class:`ResultsWriteError` says why.
+A run writes into ``<root>/.<name>.partial-XXXX``, which its process holds locked (the lock
+file ``.<name>.partial-XXXX.lock``; common.file_locks, on any OS) while it lives. When the run
+has finished, one swap at a time (the lock ``<root>/.<name>.lock``, so that two runs of the
+same scenario never interleave their renames), the folder is renamed ``.<name>.complete-XXXX``,
+the previous ``<name>`` is renamed ``.<name>.old-XXXX``, the complete one becomes ``<name>``
+and the old one is deleted. A failure at any step (a full disk, a read-only or immutable
+folder) puts back what was moved and removes the new folder: ``<name>`` is as it was, and
+:class:`ResultsWriteError` says why.
 
 A process killed at any point (SIGKILL, power loss) may leave an unlocked ``.partial-*``
 folder (an unfinished run), a ``.complete-*`` folder (a finished run not yet in place) or an
@@ -19,16 +20,16 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import fcntl
 import os
 import secrets
 import shutil
 import sys
 import tempfile
-import time
 from collections.abc import Callable, Iterator
 from datetime import datetime
 from pathlib import Path
+
+from common.file_locks import drop, is_free, lock_path, take
 
 DIR_MODE = 0o755
 KEPT = ("sweep",)  # subfolders of results/<name> that a plain run carries over
@@ -68,30 +69,22 @@ def describe_os_error(exc: OSError) -> str:
 
 
 @contextlib.contextmanager
-def _locked(path: Path, blocking: bool = True) -> Iterator[bool]:
-    """An exclusive ``flock`` on the folder ``path``; yields whether it was taken (with
-    ``blocking``, waits up to LOCK_TIMEOUT_S, then raises ResultsWriteError)."""
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+def _locked(root: Path, name: str) -> Iterator[None]:
+    """One swap at a time of the runs named ``name`` under ``root``: the lock file
+    ``<root>/.<name>.lock``, waited for up to LOCK_TIMEOUT_S (then ResultsWriteError), and
+    removed when released (a swap takes milliseconds)."""
+    lock = root / f".{name}.lock"
+    held = take(lock, timeout=LOCK_TIMEOUT_S)
+    if held is None:
+        raise ResultsWriteError(
+            errno.EBUSY,
+            f"another process has held the lock {lock} for {LOCK_TIMEOUT_S:g} s",
+            str(lock),
+        )
     try:
-        deadline = time.monotonic() + LOCK_TIMEOUT_S
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if not blocking:
-                    yield False
-                    return
-                if time.monotonic() > deadline:
-                    raise ResultsWriteError(
-                        errno.EBUSY,
-                        f"another process has held the lock on {path} for {LOCK_TIMEOUT_S:g} s",
-                        str(path),
-                    ) from None
-                time.sleep(0.05)
-        yield True
+        yield
     finally:
-        os.close(fd)  # releases the lock
+        drop(held)
 
 
 def _finished_at(folder: Path) -> float:
@@ -134,12 +127,14 @@ def recover(out_dir: Path, notify: Notify = _stderr) -> list[str]:
     removed: list[str] = []
     failed: list[str] = []
     for partial in leftovers(out_dir, PARTIAL):
-        try:
-            with _locked(partial, blocking=False) as free:
-                if free:  # no live process holds it: a run killed before it finished
-                    _remove(partial, removed, failed)
-        except FileNotFoundError:
+        if partial.name.endswith(".lock"):  # a lock whose folder is gone
+            if not partial.with_suffix("").exists() and is_free(partial):
+                partial.unlink(missing_ok=True)
             continue
+        held = take(lock_path(partial))
+        if held is not None:  # no live process holds it: a run killed before it finished
+            _remove(partial, removed, failed)
+            drop(held)
     if removed:
         notes.append(f"removed {len(removed)} unfinished run(s) of killed processes: {removed}")
     removed = []
@@ -192,11 +187,11 @@ def replaced_whole(out_dir: Path, notify: Notify = _stderr) -> Iterator[Path]:
     root = out_dir.parent
     try:
         root.mkdir(parents=True, exist_ok=True)
-        with _locked(root):
+        with _locked(root, out_dir.name):
             recover(out_dir, notify)
+            # made and locked while the name is locked: no other run's recover sees it unheld
             tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.{PARTIAL}-", dir=root))
-            hold = os.open(tmp, os.O_RDONLY | os.O_DIRECTORY)
-            fcntl.flock(hold, fcntl.LOCK_EX | fcntl.LOCK_NB)  # alive: not a leftover
+            hold = take(lock_path(tmp))
     except ResultsWriteError:
         raise
     except OSError as exc:
@@ -204,7 +199,7 @@ def replaced_whole(out_dir: Path, notify: Notify = _stderr) -> Iterator[Path]:
     try:
         os.chmod(tmp, DIR_MODE & ~_umask())  # mkdtemp makes 0700; results are ordinary
         yield tmp
-        with _locked(root):
+        with _locked(root, out_dir.name):
             _swap_in(tmp, out_dir)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -212,7 +207,7 @@ def replaced_whole(out_dir: Path, notify: Notify = _stderr) -> Iterator[Path]:
             raise _os_error(out_dir, exc) from None
         raise
     finally:
-        os.close(hold)
+        drop(hold)
 
 
 def _swap_in(tmp: Path, out_dir: Path) -> None:

@@ -364,7 +364,12 @@ def test_command_line_writes_what_the_functions_build(tmp_path):
     assert (tmp_path / "arm6r.xml").read_text() == build_xml(table, "arm6r")
     assert (tmp_path / "arm6r.params.toml").read_text() == build_parameters(table, "arm6r")
     assert (tmp_path / "arm6r.xml").stat().st_mode & 0o777 != 0o600  # not mkstemp's mode
+    # the files there are a user's: replaced only with --force, untouched without
+    before = (tmp_path / "arm6r.xml").read_bytes()
+    assert subprocess.run(cmd, cwd=ROOT, capture_output=True, timeout=60).returncode == 2
+    assert (tmp_path / "arm6r.xml").read_bytes() == before
     args = [str(TABLE), "--name", "x", "--out-dir", str(tmp_path), "--no-target-errors"]
+    args.append("--force")
     for flags, n_base in (([], 6), (["--base-errors"], 6), (["--no-base-errors"], 0)):
         assert main([*args, *flags]) == 0
         text = (tmp_path / "x.params.toml").read_text()

@@ -80,10 +80,10 @@ def test_verify_out_on_a_full_disk_writes_none_of_the_set(
     old = _previous(tmp_path)
     real = write_set_module._temporary
 
-    def temporary(target: Path) -> Path:
+    def temporary(target: Path, token: str) -> Path:
         if target.name == failing:
             raise os_error(ENOSPC, target)
-        return real(target)
+        return real(target, token)
 
     monkeypatch.setattr(write_set_module, "_temporary", temporary)
     assert main(_verify(files, tmp_path / "v.json")) == 2
@@ -212,10 +212,10 @@ def test_dh_table_on_a_full_disk_writes_neither_file(tmp_path, monkeypatch, caps
 
     real = write_set_module._temporary
 
-    def temporary(target: Path) -> Path:
+    def temporary(target: Path, token: str) -> Path:
         if target.name.endswith(".params.toml"):
             raise os_error(ENOSPC, target)
-        return real(target)
+        return real(target, token)
 
     monkeypatch.setattr(write_set_module, "_temporary", temporary)
     table = ROOT / "models/arm6r.mdh.csv"
@@ -232,10 +232,10 @@ def test_verify_as_is_on_a_full_disk_writes_neither_file(files, tmp_path, monkey
         (tmp_path / name).write_bytes(data)
     real = write_set_module._temporary
 
-    def temporary(target: Path) -> Path:
+    def temporary(target: Path, token: str) -> Path:
         if target.name == "v.csv":
             raise os_error(ENOSPC, target)
-        return real(target)
+        return real(target, token)
 
     monkeypatch.setattr(write_set_module, "_temporary", temporary)
     argv = ["verify", "--model", str(MODEL), "--data", str(files["data"])]

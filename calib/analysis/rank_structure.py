@@ -3,7 +3,7 @@
 The size of each pose's residual is rank-correlated (Spearman) with every pose variable: the
 tool position's coordinates, each actuator command, and the measurement order. A variable
 is named when its correlation is significant after a Bonferroni correction over all of them;
-none named means no such monotone structure, not that there is none (``calib diagnose``
+none named means no such monotone structure, not that there is none (``pkm-calib diagnose``
 tests the shapes it knows and a kernel correction for the rest).
 """
 

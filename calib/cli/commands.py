@@ -1,20 +1,20 @@
 """Command line for measured data (any machine: serial, parallel or hybrid).
 
-    python -m calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
-                             [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
-                             [--with D.json]
-    python -m calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
-                             [--set test] [--register | --register-set NAME]
-                             [--iso9283] [--out V.json]
-    python -m calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
-                             [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
-    python -m calib compensate --model M.xml --errors E.toml --result R.json
-                             (--commands program.csv | --poses desired.csv [--seed ...])
-                             --out commands.csv [--frame base|tracker] [--force]
-    python -m calib export   --model M.xml --errors E.toml --result R.json
-                             --out M_calibrated.xml [--dh-out T.csv]
-    python -m calib plan     --model M.xml --errors E.toml --n N --out program.csv
-                             [--candidates FILE] [--tracker-at X,Y,Z] [--predict]
+    pkm-calib identify --model M.xml --errors E.toml --data D.csv [--set calibration]
+                       [--out R.json] [--sigma-mm S] [--plain | --prior-std SPEC]
+                       [--with D.json]
+    pkm-calib verify   --model M.xml --errors E.toml --result R.json --data D.csv
+                       [--set test] [--register | --register-set NAME]
+                       [--iso9283] [--out V.json]
+    pkm-calib diagnose --model M.xml --errors E.toml --data D.csv [--set calibration]
+                       [--sigma-mm S] [--test-set test] [--test T.csv] [--out D.json]
+    pkm-calib compensate --model M.xml --errors E.toml --result R.json
+                       (--commands program.csv | --poses desired.csv [--seed ...])
+                       --out commands.csv [--frame base|tracker] [--force]
+    pkm-calib export   --model M.xml --errors E.toml --result R.json
+                       --out M_calibrated.xml [--dh-out T.csv]
+    pkm-calib plan     --model M.xml --errors E.toml --n N --out program.csv
+                       [--candidates FILE] [--tracker-at X,Y,Z] [--predict]
 
 ``identify`` fits the error model to the readings of one set (default: the rows marked
 'calibration', else all), robustly (gross outliers are rejected and listed), in the base
@@ -83,7 +83,7 @@ from calib.fit import (
 )
 from calib.loop import model_for_result, parameter_entry
 from common.atomic_files import json_text
-from common.write_set import write_files
+from common.write_set import WriteSetError, write_files
 from twin.exceptions import TwinError
 
 
@@ -273,7 +273,7 @@ def _fit_options(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m calib",
+        prog="pkm-calib",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -401,12 +401,26 @@ def check_out(args: argparse.Namespace) -> None:
                 raise ValueError(f"--out {o} would overwrite an input file: {role} ({i})")
 
 
+def os_error_text(exc: OSError, args: argparse.Namespace) -> str:
+    """A file error as a sentence with its file: a WriteSetError's own sentence, else the
+    OS's cause and file without the raw ``[Errno N]`` (no file known: the command's --out)."""
+    if isinstance(exc, WriteSetError) or not exc.strerror:
+        return str(exc)
+    if exc.filename:
+        return f"{exc.strerror}: {exc.filename}"
+    out = getattr(args, "out", None)
+    return f"{exc.strerror} (while writing {out})" if out else str(exc.strerror)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         check_out(args)
         return COMMANDS[args.command](args)
-    except (DatasetError, CalibError, TwinError, OSError, ValueError) as exc:
+    except OSError as exc:
+        print(f"error: {os_error_text(exc, args)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (DatasetError, CalibError, TwinError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -1,8 +1,8 @@
-"""``python -m calib compensate``: the commands that put the identified machine where asked.
+"""``pkm-calib compensate``: the commands that put the identified machine where asked.
 
-    python -m calib compensate --model M.xml --errors E.toml --result R.json
+    pkm-calib compensate --model M.xml --errors E.toml --result R.json
                                --commands program.csv --out corrected.csv
-    python -m calib compensate --model M.xml --errors E.toml --result R.json --poses desired.csv
+    pkm-calib compensate --model M.xml --errors E.toml --result R.json --poses desired.csv
         [--commands program.csv | --seed A1=0,...] --out commands.csv [--frame base|tracker]
         [--diagnosis D.json] [--force]
 
@@ -223,7 +223,7 @@ def with_diagnosis(model, machine: IdentifiedMachine, path: str) -> str:
     if missing:
         raise EffectFileError(
             f"the result {machine.result.path} was fitted without the effect {path} names "
-            f"({block['named']}: {', '.join(missing[:4])} missing): run `calib identify ... "
+            f"({block['named']}: {', '.join(missing[:4])} missing): run `pkm-calib identify ... "
             f"--with {path} --out R.json` and compensate that result, where geometry and "
             "effect are fitted together"
         )

@@ -1,4 +1,4 @@
-"""What ``python -m calib compensate`` writes: the commands CSV and its JSON sidecar."""
+"""What ``pkm-calib compensate`` writes: the commands CSV and its JSON sidecar."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``python -m calib diagnose``: what geometry leaves, tested for the effects it lacks."""
+"""``pkm-calib diagnose``: what geometry leaves, tested for the effects it lacks."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""``python -m calib export``: the calibrated model, for the controller or a simulator.
+"""``pkm-calib export``: the calibrated model, for the controller or a simulator.
 
-    python -m calib export --model M.xml --errors E.toml --result R.json
+    pkm-calib export --model M.xml --errors E.toml --result R.json
                            --out M_calibrated.xml [--dh-out T.csv]
 
 Writes the nominal MJCF with the identified errors in its geometry (body positions and
@@ -10,7 +10,7 @@ zero + (c - zero)(1 + gain)), after checking that its forward kinematics equals 
 model's to 1e-9 m at commands spread over the workspace. What an MJCF cannot hold (joint
 compliances) is listed beside it in M_calibrated.xml.calibration.json, which ``verify --model``
 names in its first line. With ``--dh-out``, for a model generated from a DH table
-(python -m twin.formats.dh_table), the calibrated DH table. ``verify --model M_calibrated.xml``
+(pkm-calib from-dh), the calibrated DH table. ``verify --model M_calibrated.xml``
 without ``--result`` then scores it as it is on new readings. Exit 0, or 2 with the cause
 and nothing written.
 """

@@ -1,6 +1,6 @@
-"""``python -m calib plan``: which poses to measure, in what order, and what they will give.
+"""``pkm-calib plan``: which poses to measure, in what order, and what they will give.
 
-    python -m calib plan --model M.xml --errors E.toml --n N --out program.csv
+    pkm-calib plan --model M.xml --errors E.toml --n N --out program.csv
                          [--n-test K] [--candidates FILE [--set NAME] | --n-candidates C]
                          [--margin F] [--floor-z MM] [--tracker-at X,Y,Z [--acceptance-deg A]]
                          [--criterion d_optimal|paper] [--seed S]

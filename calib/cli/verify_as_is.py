@@ -1,6 +1,6 @@
 """Scoring a model as it is: ``verify --model M.xml`` without ``--result``.
 
-An exported calibrated model (``calib export``), a vendor's model or any MJCF is scored on
+An exported calibrated model (``pkm-calib export``), a vendor's model or any MJCF is scored on
 readings with the project's one metric, the 3D position error per reading (RMS, mean, max),
 and the tool's orientation error per pose with three or more targets. Readings in the
 tracker's frame are registered by a rigid fit of the model's predictions to the readings of
@@ -8,7 +8,7 @@ the calibration set (the rows marked 'calibration'), so that the scored rows do 
 their own frame; a file without such rows (or scoring the calibration rows themselves) is
 registered on the scored rows, and the note says that this favours the model.
 
-A model written by ``calib export`` has a sidecar (calib.compensate.sidecar) listing the
+A model written by ``pkm-calib export`` has a sidecar (calib.compensate.sidecar) listing the
 identified parameters its file cannot hold; when it lists any, the first line printed says
 so: the model as it is predicts without them.
 """

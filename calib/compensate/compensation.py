@@ -34,7 +34,7 @@ def reachable_compensated_commands(
     """Like :func:`compensated_commands`, but a pose whose compensated commands leave a
     stroke is reported (mask False, its row NaN) instead of stopping the whole set: near the
     workspace boundary the real machine may not reach what its nominal model could. The
-    same solve, pose by pose from home, as ``python -m calib compensate``
+    same solve, pose by pose from home, as ``pkm-calib compensate``
     (calib.compensate.poses.solve_each), the joint values turned into commands through the
     model's joint compliances and actuator gains (if any)."""
     solved = solve_each(model.mechanism(values), poses)

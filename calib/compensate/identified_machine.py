@@ -72,8 +72,39 @@ def identified_machine(model: CalibrationModel, result: CalibrationResult) -> Id
         )
     model = model_for_result(model, result.data)
     values = result.values_for(model.params)
+    _check_plausible(result, model)
     values.setflags(write=False)
     return IdentifiedMachine(model, values, result, result.registration)
+
+
+# a value this many times the plausible size of its kind (calib.fit.verdict: 50 mm, 20 deg,
+# 20 % of a gain) is no calibration error identify estimates, nor one it would accept: a
+# file edited or damaged after identify wrote it
+IMPLAUSIBLE_FACTOR = 10.0
+
+
+def _check_plausible(result: CalibrationResult, model: CalibrationModel) -> None:
+    """Refuse (ResultFileError, naming them) a result whose values lie far beyond what an
+    error of their kind can be on a built machine."""
+    from calib.data.result_file import ResultFileError
+    from calib.fit.verdict import implausible_estimates
+
+    units = model.params.display_units()
+    shown = np.asarray(result.display_values, dtype=float) / IMPLAUSIBLE_FACTOR
+    named = implausible_estimates(result.names, shown, units)
+    if named:
+        bad = [n.split(" = ")[0] for n in named]
+        values = {n: v for n, v in zip(result.names, result.display_values, strict=True)}
+        listed = ", ".join(
+            f"{n} = {values[n]:+.6g} {u}"
+            for n, u in zip(result.names, units, strict=True)
+            if n in bad
+        )
+        raise ResultFileError(
+            f"{result.path}: implausible estimate(s): {listed} (more than "
+            f"{IMPLAUSIBLE_FACTOR:g} times the plausible size of an error of its kind: 50 mm, "
+            "20 deg); not a result identify writes: was the file edited? Identify again"
+        )
 
 
 def load_identified_machine(model: CalibrationModel, path: str | Path) -> IdentifiedMachine:

@@ -217,8 +217,8 @@ def _header(
 ) -> str:
     return (
         f"Calibrated model of '{machine.nominal.name}': {model_path.name} with the errors "
-        f"identified in {machine.result.path.name} written into its geometry by python -m "
-        f"calib export ({len(w.bodies)} bodies placed anew, {len(w.sites)} sites moved, "
+        f"identified in {machine.result.path.name} written into its geometry by pkm-calib "
+        f"export ({len(w.bodies)} bodies placed anew, {len(w.sites)} sites moved, "
         f"{len(w.joints)} joint zeros shifted as 'ref', {len(w.actuators)} actuator gains as "
         f"'gear'). Its forward kinematics differs from the identified model's by at most "
         f"{c.max_position_m * 1e3:.3g} mm over {c.n_commands} commands."
@@ -249,10 +249,10 @@ def calibrated_dh_text(machine: IdentifiedMachine, model_path: Path) -> str:
         table,
         (
             f"calibrated DH table of '{machine.nominal.name}' ({model_path.name}) with the "
-            f"errors identified in {machine.result.path.name}, written by python -m calib export",
+            f"errors identified in {machine.result.path.name}, written by pkm-calib export",
             "the joint value q is the commanded value, as before: theta (R) and d (P) include "
             "the identified encoder offsets",
-            f"generate its model: python -m twin.formats.dh_table THIS.csv --name "
+            f"generate its model: pkm-calib from-dh THIS.csv --name "
             f"{machine.nominal.name} --out-dir DIR",
             *(
                 [
@@ -294,6 +294,11 @@ def export_model(
     try:
         tmp.write_text(written.text, encoding="utf-8")
         exported = Mechanism.from_xml(tmp)
+    except OSError as exc:  # a full disk: said with the file, not as a raw errno
+        raise ExportError(
+            f"cannot write {tmp} (the calibrated model, read back to check it): "
+            f"{exc.strerror or exc}; nothing written"
+        ) from None
     finally:
         tmp.unlink(missing_ok=True)
     check = kinematics_difference(

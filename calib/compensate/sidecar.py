@@ -1,6 +1,6 @@
 """What an exported model cannot hold, written beside it (``M.xml``: ``M.xml.calibration.json``).
 
-``calib export`` writes the identified geometry and the actuator gains into the MJCF
+``pkm-calib export`` writes the identified geometry and the actuator gains into the MJCF
 (twin.formats.mjcf_values). Every other identified parameter, whatever its kind (a joint
 compliance today; any kind an MJCF has no attribute for), is listed in the sidecar with its
 kind, element, value and unit and why the model cannot hold it, together with the result it

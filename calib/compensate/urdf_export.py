@@ -1,4 +1,4 @@
-"""The calibrated URDF of a model generated from a URDF (``calib export --urdf-out``).
+"""The calibrated URDF of a model generated from a URDF (``pkm-calib export --urdf-out``).
 
 The identified geometry goes into the URDF's joint origins and the joint zeros are folded into
 them (twin.formats.urdf_values); the written URDF is read back as the project reads any URDF
@@ -49,7 +49,7 @@ class UrdfExport:
 
 
 def source_urdf(model_path: Path, urdf: str | os.PathLike[str] | None) -> Path:
-    """``urdf``, else the URDF the model's header names (python -m twin.formats.from_urdf),
+    """``urdf``, else the URDF the model's header names (pkm-calib from-urdf),
     beside the model."""
     if urdf is not None:
         return Path(urdf)
@@ -107,7 +107,7 @@ def calibrated_urdf(
     header = (
         f"Calibrated URDF of '{machine.nominal.name}': {urdf.name} with the geometry identified "
         f"in {machine.result.path.name} in its joint origins (joint zeros folded in), written "
-        f"by python -m calib export. "
+        f"by pkm-calib export. "
         + (
             f"A URDF cannot hold {len(missing)} identified parameter(s) (reflector and tool "
             f"offsets, actuator gains, ...): listed in {sidecar_path(out).name}: "

@@ -338,7 +338,10 @@ def read_csv_dataset(
     side = _read_sidecar(sidecar_path(path))
     if expected_model is not None and side["model"] != expected_model:
         raise DatasetError(
-            f"{sidecar_path(path)}: model is {side['model']!r}, expected {expected_model!r}"
+            f"{sidecar_path(path)}: model is {side['model']!r}, expected {expected_model!r} "
+            "(the model's own name: a model made by pkm-calib from-urdf takes the URDF's robot "
+            f"name; regenerate it with --name {side['model']}, or correct the sidecar's "
+            "'model' if the readings are of this machine)"
         )
     acts, targets = list(side["actuators"]), list(side["targets"])
     reader = csv.reader(io.StringIO(_read_text(path, "dataset CSV"), newline=""))

@@ -1,9 +1,9 @@
-"""The result of ``calib identify`` as a file a user can keep, read and use again.
+"""The result of ``pkm-calib identify`` as a file a user can keep, read and use again.
 
 JSON, millimetres and degrees, written atomically (0644). It carries what was estimated and
 what was fixed (and why), standard errors, the strongest correlations, the tracker
 registration when the readings were in the tracker's frame, the residual and the verdict.
-``load_result`` reads it back for ``calib verify`` or a user's own script, and refuses a file
+``load_result`` reads it back for ``pkm-calib verify`` or a user's own script, and refuses a file
 made for another model or another error model.
 """
 
@@ -100,10 +100,20 @@ def load_result(
 ) -> CalibrationResult:
     """Read a result file; ``expected_model`` refuses a result of another machine."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise ResultFileError(f"result file not found: {p}")
+    if p.is_dir():
+        raise ResultFileError(f"{p} is a folder, not a result file (identify --out R.json)")
+    if not p.is_file():
+        raise ResultFileError(
+            f"{p} is not a regular file (a device, pipe or socket), not a result file "
+            "(identify --out R.json)"
+        )
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
+        if not text.strip():
+            raise ResultFileError(f"{p} is empty, not a result file (identify --out R.json)")
+        data = json.loads(text)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ResultFileError(f"{p} is not a result file (JSON, UTF-8): {exc}") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:

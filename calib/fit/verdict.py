@@ -9,7 +9,7 @@ the data are not the machine's), or a residual no calibrated machine leaves (abo
 model file). A residual above the declared tracker accuracy with none of these is the normal
 case on a real machine (its unmodelled effects leave 10-20 times the tracker noise): the
 verdict is a success that says how far above the noise the residual is, whether it is
-structured, and that ``calib diagnose`` is the next step. ``--max-ratio`` turns such a
+structured, and that ``pkm-calib diagnose`` is the next step. ``--max-ratio`` turns such a
 residual into a failure for a user who wants that gate. Exit codes:
 
     0  success (the residual's size against the noise is said)
@@ -204,7 +204,7 @@ def judge_fit(
         found = f"; {structure}" if structure else ""
         tail = (
             f"more than the tracker noise{found}. Real machines leave 10-20 times their "
-            "tracker noise after a geometric fit: the geometry is identified; `calib "
+            "tracker noise after a geometric fit: the geometry is identified; `pkm-calib "
             "diagnose` tests which effect the model lacks"
         )
     return verdict(

@@ -1,6 +1,6 @@
 """The path a user with measured data takes: select a set, identify, judge, keep, verify.
 
-The command line (``python -m calib``) and the scenarios call the same functions, so a twin
+The command line (``pkm-calib``) and the scenarios call the same functions, so a twin
 scenario exercises exactly what a real export goes through.
 """
 

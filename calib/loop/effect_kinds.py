@@ -1,6 +1,6 @@
 """What a diagnosis names, as parameters of the error model: the loop closed in files.
 
-``calib diagnose --out D.json`` writes, beside the named effect's fit, the error-model
+``pkm-calib diagnose --out D.json`` writes, beside the named effect's fit, the error-model
 parameters that carry it (static kinds: a function of the commanded pose alone; and the
 offsets of calib.loop.offset_effects, which also read the state at each reading):
 
@@ -18,7 +18,7 @@ offsets of calib.loop.offset_effects, which also read the state at each reading)
                         payload the diagnosis's scan chose, written as the parameters'
                         ``payload_kg`` so that the kind's load is the one the diagnosis fitted
 
-``calib identify --with D.json`` adds them to the error model and refits geometry and effect
+``pkm-calib identify --with D.json`` adds them to the error model and refits geometry and effect
 together; the result file lists them (``added_parameters``), and :func:`model_for_result`
 rebuilds that model wherever the result is read. An effect of the tracker, or one that grows
 the whole structure (thermal_expansion of the diagnosis), is no kind of the error model: it is
@@ -224,7 +224,9 @@ def load_effect(path: str, model: CalibrationModel, allow_empty: bool = False) -
         raise EffectFileError(f"{p} is not a diagnosis file (JSON, UTF-8): {exc}") from None
     block = data.get("effect") if isinstance(data, dict) else None
     if not isinstance(block, dict):
-        raise EffectFileError(f"{p} has no 'effect' block: write it with `calib diagnose --out`")
+        raise EffectFileError(
+            f"{p} has no 'effect' block: write it with `pkm-calib diagnose --out`"
+        )
     if block.get("model") != model.nominal.name:
         raise EffectFileError(
             f"{p} diagnosed model '{block.get('model')}', not '{model.nominal.name}'"

@@ -6,8 +6,8 @@ gain ...; ``truth_scale`` times that), the readings of the program's calibration
 simulated through forward kinematics of the model with that truth injected (the calibration
 model's own prediction: twin.kinematics.batch.forward_batch on the injected mechanism, gains
 and compliances included), with Gaussian noise of ``sigma`` per coordinate, and identified as
-``calib identify`` does (robust, weak directions kept at zero where cross-validation says
-so). The held-out error is what ``calib verify`` reports on the test poses: the 3D distance
+``pkm-calib identify`` does (robust, weak directions kept at zero where cross-validation says
+so). The held-out error is what ``pkm-calib verify`` reports on the test poses: the 3D distance
 between a simulated reading (noise included) and the identified model's prediction. Its
 median and 90th percentile over the test poses, per draw, are the prediction; the spread over
 draws is its uncertainty. Beside it, the same of the model's own error (the identified

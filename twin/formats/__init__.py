@@ -1,6 +1,5 @@
 """Machine models as files: MJCF numbers and values, error models (TOML, generated for any
-MJCF), DH tables and URDF imported into MJCF (python -m
-twin.formats.dh_table|from_urdf|error_model)."""
+MJCF), DH tables and URDF imported into MJCF (pkm-calib from-dh|from-urdf|error-model)."""
 
 from common.face import face
 
@@ -15,7 +14,9 @@ __all__, __getattr__, __dir__ = face(
             "build_xml",
             "exact",
         ),
-        "dh_table": ("read_dh_table",),
+        "dh_table": ("dh_table_command", "read_dh_table"),
+        "error_model": ("error_model_command",),
+        "from_urdf": ("from_urdf_command",),
         "mjcf_values": (
             "WrittenMjcf",
             "mjcf_with_values",

@@ -63,7 +63,7 @@ def _convention(model: mujoco.MjModel) -> str:
     base, dh1, link1 = (_body(model, n) for n in ("base", "link1_dh", "link1"))
     if base is None or dh1 is None or link1 is None:
         raise DHStructureError(
-            "the model was not generated from a DH table (python -m twin.formats.dh_table): it has no "  # noqa: E501
+            "the model was not generated from a DH table (pkm-calib from-dh): it has no "
             "bodies 'base', 'link1_dh' and 'link1'"
         )
     if model.body_parentid[link1] == dh1 and model.body_parentid[dh1] == base:

@@ -1,11 +1,12 @@
 """Serial arms from their DH table (CSV): an MJCF model and its error model, one command.
 
-    python -m twin.formats.dh_table TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
+    pkm-calib from-dh TABLE.csv --name NAME --out-dir DIR [--targets target_1,...]
         [--no-target-errors] [--no-base-errors]
 
-writes ``DIR/NAME.xml`` and ``DIR/NAME.params.toml`` (atomically). ``twin.formats.dh_mjcf`` says
-how the model is built and which parameter is which. The error model holds the base's
-placement in the world (``base.*``) unless ``--no-base-errors``.
+writes ``DIR/NAME.xml`` and ``DIR/NAME.params.toml`` (together; existing ones only with
+``--force``). ``twin.formats.dh_mjcf`` says how the model is built and which parameter is
+which. The error model holds the base's placement in the world (``base.*``) unless ``--no-base-
+errors``.
 
 Table format (UTF-8 CSV; blank lines and lines starting with ``#`` are skipped)::
 
@@ -42,8 +43,10 @@ import re
 import sys
 from pathlib import Path
 
+from twin.exceptions import ModelError
 from twin.formats.dh import DHJoint, DHSite, DHTable, DHTableError
 from twin.formats.dh_mjcf import build_parameters, build_xml
+from twin.formats.model_files import out_files, write_model_files
 from twin.formats.parameter_file import closest, read_utf8
 
 CONVENTIONS = ("standard", "modified")
@@ -226,9 +229,7 @@ def read_dh_table(path: str | Path) -> DHTable:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m twin.formats.dh_table", description=__doc__.split("\n")[0]
-    )
+    ap = argparse.ArgumentParser(prog="pkm-calib from-dh", description=__doc__.split("\n")[0])
     ap.add_argument("table", help="DH table (CSV)")
     ap.add_argument("--name", required=True, help="model name: NAME.xml, NAME.params.toml")
     ap.add_argument("--out-dir", default=".", help="where to write (default: .)")
@@ -247,6 +248,9 @@ def main(argv: list[str] | None = None) -> int:
         "readings identify finds them redundant with the registration and fixes them); "
         "--no-base-errors leaves them out",
     )
+    ap.add_argument(
+        "--force", action="store_true", help="replace existing NAME.xml, NAME.params.toml"
+    )
     args = ap.parse_args(argv)
     if not _NAME.match(args.name):
         ap.error(f"--name '{args.name}' is not a valid name")
@@ -257,20 +261,20 @@ def main(argv: list[str] | None = None) -> int:
     except DHTableError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    # the project's one writer of file sets; it lives in calib but depends on nothing there
-    from common.write_set import write_files
-
-    out = Path(args.out_dir)
-    xml, toml = out / f"{args.name}.xml", out / f"{args.name}.params.toml"
-    params = build_parameters(table, args.name, not args.no_target_errors, args.base_errors)
-    try:  # the model and its error model together, or neither
-        write_files({xml: build_xml(table, args.name), toml: params}, make_parents=True)
-    except OSError as exc:
+    names = [f"{args.name}.xml", f"{args.name}.params.toml"]
+    try:
+        xml, toml = out_files(args.out_dir, names, args.force)
+    except ModelError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    params = build_parameters(table, args.name, not args.no_target_errors, args.base_errors)
+    if not write_model_files({xml: build_xml(table, args.name), toml: params}):  # both or none
         return 2
     print(f"wrote {xml} and {toml}")
     return 0
 
+
+dh_table_command = main  # pkm-calib from-dh (pkm_calib.command)
 
 if __name__ == "__main__":
     raise SystemExit(main())

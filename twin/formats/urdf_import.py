@@ -10,6 +10,7 @@ link a user names exists. Links without an ``<inertial>`` get MuJoCo's bounded d
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,12 @@ from twin.formats.parameter_file import read_utf8
 from twin.mechanism import compile_spec
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+# the deepest chain of links taken: machines have a few dozen at most, and the MJCF writer
+# nests one body per link
+MAX_DEPTH = 100
+# attributes that hold numbers, checked finite before MuJoCo reads them
+NUMBER_ATTRIBUTES = ("xyz", "rpy", "lower", "upper", "value", "ixx", "ixy", "ixz", "iyy")
+NUMBER_ATTRIBUTES += ("iyz", "izz", "effort", "velocity")
 
 
 class UrdfError(ModelError):
@@ -82,6 +89,9 @@ def read_urdf(path: str | Path) -> Urdf:
             movable.append(jname)
     if not movable:
         raise UrdfError(f"{path}: no movable joint: nothing to command")
+    _check_numbers(root, path)
+    _check_limits(root, path)
+    _check_depth(root, path)
     with_inertial = frozenset(
         link.get("name", "") for link in root.findall("link") if link.find("inertial") is not None
     )
@@ -93,6 +103,76 @@ def read_urdf(path: str | Path) -> Urdf:
     spec.modelfiledir = str(path.parent)
     model, defaulted = compile_spec(spec, str(path))
     return Urdf(path, name, model, links, tuple(movable), with_inertial, defaulted)
+
+
+def _where(element: ET.Element, parents: dict[ET.Element, ET.Element]) -> str:
+    named = element
+    while named is not None and not named.get("name"):
+        named = parents.get(named)
+    owner = f"{named.tag} '{named.get('name')}'" if named is not None else "the robot"
+    return f"<{element.tag}> of {owner}" if named is not element else owner
+
+
+def _check_numbers(root: ET.Element, path: Path) -> None:
+    """Every number a URDF attribute holds is finite (a NaN would reach MuJoCo's compile)."""
+    parents = {child: parent for parent in root.iter() for child in parent}
+    for element in root.iter():
+        for attr in NUMBER_ATTRIBUTES:
+            text = element.get(attr)
+            if text is None:
+                continue
+            try:
+                values = [float(v) for v in text.split()]
+            except ValueError:
+                values = []
+            if not values or not all(math.isfinite(v) for v in values):
+                raise UrdfError(
+                    f'{path}: {_where(element, parents)}: {attr}="{text}" is not a list of '
+                    "finite numbers"
+                )
+
+
+def _check_limits(root: ET.Element, path: Path) -> None:
+    """A prismatic joint has a <limit> (an unlimited slide is no machine's); lower <= upper."""
+    for joint in root.findall("joint"):
+        name, kind, limit = joint.get("name", ""), joint.get("type", ""), joint.find("limit")
+        if kind == "prismatic" and (
+            limit is None or limit.get("lower") is None or limit.get("upper") is None
+        ):
+            raise UrdfError(
+                f"{path}: prismatic joint '{name}' has no <limit lower=... upper=...> (m): "
+                "give its travel (the URDF standard requires it)"
+            )
+        if kind in ("revolute", "prismatic") and limit is not None:
+            lower, upper = float(limit.get("lower", 0.0)), float(limit.get("upper", 0.0))
+            if lower > upper:
+                raise UrdfError(
+                    f"{path}: joint '{name}' has <limit lower=\"{limit.get('lower')}\" "
+                    f'upper="{limit.get("upper")}">: lower is above upper; swap them'
+                )
+
+
+def _check_depth(root: ET.Element, path: Path) -> None:
+    """The chain of links is at most MAX_DEPTH deep (counted without recursion)."""
+    parent_of = {}
+    for joint in root.findall("joint"):
+        p, c = joint.find("parent"), joint.find("child")
+        if p is not None and c is not None:
+            parent_of[c.get("link", "")] = p.get("link", "")
+    deepest, depth_of = 0, {}
+    for link in parent_of:
+        chain, cur = [], link
+        while cur in parent_of and cur not in depth_of and len(chain) <= len(parent_of):
+            chain.append(cur)
+            cur = parent_of[cur]
+        base = depth_of.get(cur, 0)
+        for i, name in enumerate(reversed(chain)):
+            depth_of[name] = base + i + 1
+        deepest = max(deepest, depth_of.get(link, 0))
+    if deepest > MAX_DEPTH:
+        raise UrdfError(
+            f"{path}: a chain {deepest} joints deep; a machine model here takes at most {MAX_DEPTH}"
+        )
 
 
 def body_of_link(urdf: Urdf, link: str) -> int:

@@ -28,21 +28,38 @@ that joint (:func:`velocity_map`); hinge, slide and ball coordinates agree.
 
 from __future__ import annotations
 
+import importlib
 import os
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
-import pinocchio as pin
 
 from twin.exceptions import ModelError
 from twin.rotations import matrix_from_quat
 
+if TYPE_CHECKING:
+    import pinocchio as pin
+
 ROOT_BODY = "pinocchio_root"  # static root body wrapping the world (its sites are dropped)
 WORLD_BODY = "pinocchio_world"  # static body carrying the world-level sites and bodies
+
+
+def _pinocchio():
+    """pinocchio, imported when a cross-check asks for it: it is a test tool (the dev extra,
+    package ``pin``), not a dependency of the calibration commands."""
+    try:
+        return importlib.import_module("pinocchio")
+    except ImportError:
+        raise ModelError(
+            "the pinocchio cross-check needs pinocchio: pip install 'pkm-calib[dev]'"
+        ) from None
+
+
 BODY_SUFFIX = "__body"  # appended to a body whose name is also a site's name
 COMPOSITE_PREFIX = "Composite_"  # pinocchio's name for the joints of a multi-joint body
 
@@ -122,6 +139,7 @@ def pinocchio_from_mjcf(
     ``connect`` (PointAnchor) equalities, points first; ``None`` when not asked for or when
     this pinocchio has no ``buildModelAndConstraintsFromMJCF``.
     """
+    pin = _pinocchio()
     xml = pinocchio_mjcf_string(path)
     fd, tmp = tempfile.mkstemp(suffix=".xml", prefix="pinocchio_")
     try:
@@ -253,6 +271,7 @@ def velocity_map(model_mj: mujoco.MjModel, model_pin: pin.Model, qpos: np.ndarra
 # --------------------------------------------------------------------------- frames
 def site_frame_id(model_pin: pin.Model, site_name: str) -> int:
     """Pinocchio frame index of an MJCF site (an OP_FRAME of the same name)."""
+    pin = _pinocchio()
     if not model_pin.existFrame(site_name, pin.FrameType.OP_FRAME):
         raise ModelError(f"pinocchio model '{model_pin.name}' has no site frame '{site_name}'")
     return int(model_pin.getFrameId(site_name, pin.FrameType.OP_FRAME))
@@ -262,7 +281,7 @@ def frame_placement(
     model_pin: pin.Model, data_pin: pin.Data, q: np.ndarray, site_name: str
 ) -> tuple[np.ndarray, np.ndarray]:
     """World rotation (3, 3) and position (3,) of a site at pinocchio configuration ``q``."""
-    fid = site_frame_id(model_pin, site_name)
+    fid, pin = site_frame_id(model_pin, site_name), _pinocchio()
     pin.framesForwardKinematics(model_pin, data_pin, np.asarray(q, dtype=float))
     placement = data_pin.oMf[fid]
     return placement.rotation.copy(), placement.translation.copy()
@@ -273,7 +292,7 @@ def frame_jacobian_world(
 ) -> np.ndarray:
     """Site Jacobian (6, nv) in LOCAL_WORLD_ALIGNED: rows are the site origin's linear velocity
     then the angular velocity, both in world axes (MuJoCo's ``mj_jacSite`` convention)."""
-    fid = site_frame_id(model_pin, site_name)
+    fid, pin = site_frame_id(model_pin, site_name), _pinocchio()
     return pin.computeFrameJacobian(
         model_pin,
         data_pin,

@@ -173,9 +173,9 @@ def report(s: dict[str, Any]) -> str:
     export = s.get("export")
     if export:
         lines += [
-            f"The compensated commands come from the pose-by-pose solve `python -m calib "
+            f"The compensated commands come from the pose-by-pose solve `pkm-calib "
             f"compensate` uses. The calibrated model (256 random poses) written into the MJCF as "
-            f"`python -m calib export` writes it ({export['file']}) differs from the identified "
+            f"`pkm-calib export` writes it ({export['file']}) differs from the identified "
             f"model's forward kinematics by at most {export['max_fk_diff_mm']:.2g} mm over "
             f"{export['n_commands']} commands (the grid's nominal and compensated ones).",
             "",

@@ -3,8 +3,8 @@
 (a) 9 random poses, no noise: recover the 54 errors of its Table 2;
 (b) pose noise uniform +-0.02 mm / +-0.004 deg: 29 random poses against 256 random poses;
 (c) verification on 216 poses (3 x 3 x 3 nodes, 8 orientations each) before and after
-    compensation, as in its Table 6 (the commands by the solve ``calib compensate`` uses);
-(d) the calibrated model exported (what ``calib export`` writes) and its kinematics checked.
+    compensation, as in its Table 6 (the commands by the solve ``pkm-calib compensate`` uses);
+(d) the calibrated model exported (what ``pkm-calib export`` writes) and its kinematics checked.
 The calibration side sees only the nominal model, the error model and Dataset files.
 """
 
@@ -175,7 +175,7 @@ def export_check(
     commands: np.ndarray,
     out: Path,
 ) -> dict[str, Any]:
-    """The nominal MJCF with ``values`` written in (what ``calib export`` writes), saved to
+    """The nominal MJCF with ``values`` written in (what ``pkm-calib export`` writes), saved to
     ``out``, and its forward kinematics against the identified model's at ``commands``."""
     written = mjcf_with_values(model_path, model.nominal.model, model.params, values)
     exported = Mechanism.from_xml_string(written.text)

@@ -60,10 +60,10 @@ def report(s: dict[str, Any]) -> str:
     lines = [
         "# ISO 9283 pose accuracy and repeatability, before and after a calibration",
         "",
-        "Each machine is calibrated by `calib identify` on random poses measured by a tracker "
+        "Each machine is calibrated by `pkm-calib identify` on random poses measured by a tracker "
         "in its own frame, then reaches the standard's five cube poses (P1 the centre, P2-P5 "
         "on the diagonal plane at 10 % of its diagonal from the corners) in cycles, and "
-        "`calib verify --iso9283` scores them. Before: the command pose is what the nominal "
+        "`pkm-calib verify --iso9283` scores them. Before: the command pose is what the nominal "
         "model predicts; after: what the calibrated one predicts (what compensation would aim "
         "at). The machines' own repeatability in the twin: gaussian "
         f"{rep['position_mm']:g} mm and {rep['rotation_deg']:g} deg per component; tracker "

@@ -10,8 +10,8 @@ model's inverse kinematics commands them (what the controller does), each reache
 ``plan.cycles`` times in cycles P1..P5. The machine's own repeatability is a gaussian pose
 noise; the tracker adds its own. Then, in process, exactly as a user:
 
-    python -m calib identify --model M --errors E --data D --set calibration --out R.json
-    python -m calib verify   --model M --errors E --data D --result R.json --set iso \\
+    pkm-calib identify --model M --errors E --data D --set calibration --out R.json
+    pkm-calib verify   --model M --errors E --data D --result R.json --set iso \\
                              --iso9283 --out iso.json
 
 The numbers come from the files those commands write.
@@ -58,7 +58,7 @@ def _cli(args: list[str], log: Path) -> int:
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
         code = calib_main(args)
-    log.write_text(f"$ python -m calib {' '.join(args)}\n{out.getvalue()}exit {code}\n")
+    log.write_text(f"$ pkm-calib {' '.join(args)}\n{out.getvalue()}exit {code}\n")
     return code
 
 

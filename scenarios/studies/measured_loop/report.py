@@ -61,7 +61,7 @@ def _to_the_machine(s: dict[str, Any]) -> list[str]:
         joint, change = max(p["max_joint_change"].items(), key=lambda kv: kv[1])
         m = p["after_mean_in_tool_frame_mm"]
         lines += [
-            f"**To the machine.** `calib compensate --commands` corrected a program of "
+            f"**To the machine.** `pkm-calib compensate --commands` corrected a program of "
             f"{p['n_targets']} joint targets through the result with its effect (exit code "
             f"{p['exit_code']}, {p['n_written']} written); the twin, compliance and all, moved "
             f"to them: the true tool point's error against the nominal intent (tracker frame) "
@@ -79,8 +79,9 @@ def _to_the_machine(s: dict[str, Any]) -> list[str]:
         t = e["verify_as_is_test"]
         rms = "-" if t.get("rms_mm") is None else f"{t['rms_mm']:.4f}"
         lines += [
-            f"`calib export` wrote the calibrated MJCF (exit code {e['exit_codes']['export']}); "
-            f"`calib verify --model` of it as it is scores the test set at {rms} mm RMS (exit "
+            "`pkm-calib export` wrote the calibrated MJCF (exit code "
+            f"{e['exit_codes']['export']}); "
+            f"`pkm-calib verify --model` of it as it is scores the test set at {rms} mm RMS (exit "
             f"code {e['exit_codes']['verify_as_is']}), "
             + (f"and says first: {lacks}" if lacks else "and the file holds every parameter."),
             "",

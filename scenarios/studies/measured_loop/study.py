@@ -6,11 +6,11 @@ joints wind up under a payload (the twin's joint compliance), measured by a trac
 geometric fit leaves 10-20 times the tracker noise, as real machines do. The study writes
 one dataset file (a calibration and a test set) and runs, in process:
 
-    python -m calib identify --set calibration --out R.json
-    python -m calib verify   --result R.json --set test --out V.json
-    python -m calib diagnose --test-set test --out D.json
-    python -m calib identify --with D.json --out RW.json      (if the effect is static)
-    python -m calib verify   --result RW.json --set test --out VW.json
+    pkm-calib identify --set calibration --out R.json
+    pkm-calib verify   --result R.json --set test --out V.json
+    pkm-calib diagnose --test-set test --out D.json
+    pkm-calib identify --with D.json --out RW.json      (if the effect is static)
+    pkm-calib verify   --result RW.json --set test --out VW.json
 
 Every number comes from the files those commands write; their logs lie beside the report.
 """

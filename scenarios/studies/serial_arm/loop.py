@@ -1,11 +1,11 @@
 """serial_arm, after verify: the loop closed through the user's commands.
 
-    python -m calib compensate --model M --errors E --result R.json --frame tracker
+    pkm-calib compensate --model M --errors E --result R.json --frame tracker
                                --poses desired.csv --out commands.csv
-    python -m calib export     --model M --errors E --result R.json --out M_calibrated.xml
+    pkm-calib export     --model M --errors E --result R.json --out M_calibrated.xml
                                --dh-out M_calibrated.mdh.csv
-    python -m calib verify     --model M_calibrated.xml --data D --set test --out V.json
-    python -m calib compensate --model M --errors E --result R.json
+    pkm-calib verify     --model M_calibrated.xml --data D --set test --out V.json
+    pkm-calib compensate --model M --errors E --result R.json
                                --commands program.csv --out corrected.csv
 
 The desired tool positions are spread over the arm's workspace (the tool points of joint

@@ -1,6 +1,6 @@
 """A robot's program through the calibration, as a user runs it, re-measured on the twin.
 
-    python -m calib compensate --model M --errors E --result R.json
+    pkm-calib compensate --model M --errors E --result R.json
                                --commands program.csv --out corrected.csv
 
 The program is ``n`` joint targets drawn over a fraction of each joint's range. Its intent is

@@ -90,7 +90,7 @@ def _program(s: dict[str, Any], three: dict[str, Any]) -> list[str]:
     lines = [
         "## A robot's program",
         "",
-        "`python -m calib compensate --commands program.csv` corrected a program of joint "
+        "`pkm-calib compensate --commands program.csv` corrected a program of joint "
         "targets (drawn over the same fraction of each range): each target's commands now put "
         "the identified tool frame where the nominal model puts it at the program's commands, "
         "as the tracker sees it through the nominal model's registration, solved from the "
@@ -156,7 +156,7 @@ def report(s: dict[str, Any]) -> str:
         "its MJCF) carries a seeded draw of DH errors. A laser tracker "
         f"{s['tracker_distance_mm'] / 1000:.1f} m away, turned 100 deg, reports the reflectors "
         "in its own frame. One dataset file holds the calibration and the test set; "
-        "`python -m calib identify --set calibration` and `python -m calib verify --set test` "
+        "`pkm-calib identify --set calibration` and `pkm-calib verify --set test` "
         "ran on it exactly as a user runs them (their logs are beside this report).",
         "",
         "Metric: the 3D position error of each reading |p_measured - p_model| (mm), RMS / max "
@@ -185,11 +185,11 @@ def report(s: dict[str, Any]) -> str:
         "",
         "## From the calibration to the machine",
         "",
-        "`python -m calib compensate --frame tracker` turned tool positions spread over the "
+        "`pkm-calib compensate --frame tracker` turned tool positions spread over the "
         "workspace (given in the tracker's frame, at the nominal orientation) into commands; "
         "the truth twin moved to them and to the nominal model's commands (registered to the "
         "calibration readings, as verify's 'before'). Metric: the true 3D error of the tool "
-        "point at the desired position, in the tracker's frame (mm). `python -m calib export` "
+        "point at the desired position, in the tracker's frame (mm). `pkm-calib export` "
         "wrote the calibrated MJCF and DH table; their forward kinematics is compared with the "
         "identified model's at every command of the study, and `verify --model` of the "
         "exported file scores it as it is on the test set.",

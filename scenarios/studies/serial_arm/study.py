@@ -5,8 +5,8 @@ with a seeded draw of DH errors. A laser tracker 4-6 m away, turned about its ve
 reports the reflector(s) in its own frame. The study writes one dataset file holding a
 calibration and a test set, then runs the user's commands on it, in process:
 
-    python -m calib identify --model M --errors E --data D --set calibration --out R.json
-    python -m calib verify   --model M --errors E --result R.json --data D --set test --out V.json
+    pkm-calib identify --model M --errors E --data D --set calibration --out R.json
+    pkm-calib verify   --model M --errors E --result R.json --data D --set test --out V.json
 
 once with one reflector (positions only) and once with three, then closes the loop through
 ``compensate``, ``export`` and ``verify`` of the exported model (scenarios.studies.serial_arm.loop).
@@ -57,11 +57,11 @@ def _joints(mech: Mechanism, n: int, fraction: float, rng: np.random.Generator) 
 
 
 def _cli(args: list[str], log: Path) -> int:
-    """Run ``python -m calib ...`` in process; its output goes to ``log``."""
+    """Run ``pkm-calib ...`` in process; its output goes to ``log``."""
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
         code = calib_main(args)
-    log.write_text(f"$ python -m calib {' '.join(args)}\n{out.getvalue()}exit {code}\n")
+    log.write_text(f"$ pkm-calib {' '.join(args)}\n{out.getvalue()}exit {code}\n")
     return code
 
 
