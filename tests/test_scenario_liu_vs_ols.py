@@ -129,10 +129,11 @@ def test_liu_prediction_is_ols_within_the_noise_ceiling(summary):
     reproduce the paper's gain on the test layer (0.030 against OLS's 0.035 mm, 14 %).
 
     The bound is the noise ceiling of the same run: the test-layer mean position error the
-    tracker noise alone leaves after OLS (its Monte Carlo over 10^4 draws). An estimator that
-    treats the noise differently moves the head by less than that on average (triangle
-    inequality on each pose's error), so Liu's difference from OLS above it would be a
-    change of the geometry, not of the noise. The paper's 5 um gain is above the ceiling."""
+    tracker noise alone leaves after OLS (its Monte Carlo over 10^4 draws). A shrinkage
+    estimator gains by scattering less under the noise, and removing all of the noise's part
+    of each pose's error lowers the mean by at most the mean of that part (triangle
+    inequality): Liu's gain over OLS cannot exceed the ceiling, and the prediction is that it
+    stays within the ceiling of OLS on either side. The paper's 5 um gain is above it."""
     test = summary["layers"]["test"]
     ceiling_mm = summary["noise_only_test_um"]["ols"]["mean"] * 1e-3
     diff = test["liu"]["pos_mean_mm"] - test["ols"]["pos_mean_mm"]
