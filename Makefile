@@ -26,10 +26,13 @@ $(STAMP): pyproject.toml
 
 # The tests on every core (pytest-xdist; WORKERS=0: in this process), a module whole on one
 # worker (its fixtures built once), the modules with accuracy gates first (tests/conftest.py).
-# BLAS on one thread per worker: the workers already fill the cores.
-WORKERS ?= auto
-PYTEST  := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
-	$(PY) -m pytest -q -n $(WORKERS) --dist loadfile --no-loadscope-reorder
+# BLAS on one thread per worker: the workers already fill the cores. -rs: a line per
+# skipped test with its reason at the end; TESTFLAGS: more pytest options (.ci/run: a junit
+# XML that .ci/check_skips.py reads).
+WORKERS   ?= auto
+TESTFLAGS ?=
+PYTEST    := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+	$(PY) -m pytest -q -rs -n $(WORKERS) --dist loadfile --no-loadscope-reorder $(TESTFLAGS)
 
 test: $(STAMP)
 	$(PYTEST)

@@ -66,12 +66,16 @@ def test_no_effect_is_not_invented(setup):
     ids=["thermal", "backlash", "lead", "gravity"],
 )
 def test_each_effect_is_named(setup, effect, name):
-    d = _diagnose(setup, [effect])
-    assert d.excess and d.chosen == name
-    # with the effect in the model the held-out error falls to the noise floor
-    assert d.scores[name].heldout_rms_mm < 1.2 * SIGMA * 1e3 < d.scores["none"].heldout_rms_mm
-    if name == "lead_error":  # the pitch is scanned (2-20 mm), not assumed: it finds 5 mm
-        assert d.effect_parameters[name]["pitch"]["value"] == pytest.approx(5.0, abs=0.05)
+    """Named in each of three noise draws (a rate of 3 in 3, not one seed's answer)."""
+    named = {}
+    for seed in (1, 2, 3):
+        d = _diagnose(setup, [effect], seed=seed)
+        named[seed] = d.chosen if d.excess else f"no excess: {d.chosen}"
+        # with the effect in the model the held-out error falls to the noise floor
+        assert d.scores[name].heldout_rms_mm < 1.2 * SIGMA * 1e3 < d.scores["none"].heldout_rms_mm
+        if name == "lead_error":  # the pitch is scanned (2-20 mm), not assumed: it finds 5 mm
+            assert d.effect_parameters[name]["pitch"]["value"] == pytest.approx(5.0, abs=0.05)
+    assert set(named.values()) == {name}, named
 
 
 def test_two_effects_at_once(setup):

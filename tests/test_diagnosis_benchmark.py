@@ -1,5 +1,6 @@
-"""The diagnosis_benchmark scenario on a reduced copy: its summary contract, a strong clear case
-named right, geometry-only truths without a false alarm."""
+"""The diagnosis_benchmark scenario on a reduced copy: its summary contract, and its goal as a
+rate over a few dozen cases of the 6R arm (its cases the cheapest: about 1 s each) judged
+against the binomial spread of a rate that meets the goal."""
 
 from __future__ import annotations
 
@@ -10,11 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from recording_faces import assert_every_face_has_data
+from scipy.stats import binom
 
 from scenarios.config import ScenarioError, load_scenario
 from scenarios.machine_setup import EFFECTS
 from scenarios.runner import run_scenario
 from scenarios.studies.diagnosis_benchmark.study import (
+    ABSORBED_P,
     ACCEPTED,
     EFFECT_TYPES,
     SCALED,
@@ -27,16 +30,18 @@ ROOT = Path(__file__).resolve().parent.parent
 COMMITTED = ROOT / "scenarios" / "studies" / "diagnosis_benchmark" / "diagnosis_benchmark.toml"
 
 
-def _reduced(tmp_path: Path, **benchmark) -> Path:
-    """The committed file with absolute model paths and a smaller [benchmark] / [plan]."""
+def _reduced(tmp_path: Path, machine: str = "hexapod", **benchmark) -> Path:
+    """The committed file with absolute model paths, one of its machines and a smaller
+    [benchmark] / [plan]."""
     text = COMMITTED.read_text()
     data = tomllib.loads(text)
+    files = {"hexapod": data, **{m["label"]: m for m in data["extra_machines"]}}[machine]
     lines = [
         'name = "diagnosis_benchmark_small"',
         'study = "diagnosis_benchmark"',
-        'machine = "hexapod"',
-        f'model = "{ROOT / data["model"]}"',
-        f'error_model = "{ROOT / data["error_model"]}"',
+        f'machine = "{machine}"',
+        f'model = "{ROOT / files["model"]}"',
+        f'error_model = "{ROOT / files["error_model"]}"',
         "[truth.random]",
         *(f"{k} = {json.dumps(v)}" for k, v in data["truth"]["random"].items()),
         "[tracker]",
@@ -53,15 +58,22 @@ def _reduced(tmp_path: Path, **benchmark) -> Path:
     return path
 
 
+ARM_KINDS = tomllib.loads(COMMITTED.read_text())["extra_machines"][1]["kinds"]
+SEEDS, NONE_SEEDS = [1, 2, 3], list(range(101, 121))
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
+    """The arm's six kinds at 3 and 10 x the noise over three seeds (36 effect cases) and 20
+    geometry-only truths: about 45 s on one core."""
     tmp = tmp_path_factory.mktemp("bench")
     path = _reduced(
         tmp,
-        kinds=["lead_error_harmonic"],
-        multipliers=[10.0],
-        seeds=[1],
-        none_seeds=[101, 102],
+        "arm6r",
+        kinds=ARM_KINDS,
+        multipliers=[3.0, 10.0],
+        seeds=SEEDS,
+        none_seeds=NONE_SEEDS,
     )
     return run_scenario(str(path), tmp / "results", quiet=True)
 
@@ -107,7 +119,7 @@ def _case(kind, named, multiplier=3.0, machine="hexapod", absorbed=False, p=1e-9
 
 
 def test_absorbed_cases_are_counted_beside_the_rate_not_in_it():
-    from scenarios.studies.diagnosis_benchmark.study import ABSORBED_P, aggregate
+    from scenarios.studies.diagnosis_benchmark.study import aggregate
 
     results = [
         _case("backlash", "backlash"),
@@ -153,24 +165,28 @@ def test_unknown_kind_is_rejected_at_load(tmp_path):
         load_scenario(str(path))
 
 
+def _alarmed(case: dict) -> bool:
+    """A geometry-only truth raised an alarm: an effect named, the pipeline refused, or the
+    residual called an excess of the noise with nothing to explain it ("unexplained", which
+    the study files under "none": the diagnosis's chi-square test at its own level)."""
+    return case["named"] != "none" or case["chi2_p_value"] < ABSORBED_P
+
+
 @pytest.mark.accuracy
-def test_summary_contract_clear_case_and_no_false_alarm(run):
+def test_summary_contract(run):
     s, out_dir = run
     for key in ("n_cases", "confusion", "correct_rate", "false_alarm_rate", "heldout_worse_count"):
         assert key in s
-    assert s["n_cases"] == 3
-    assert json.loads((out_dir / "summary.json").read_text())["n_cases"] == 3
+    n = len(ARM_KINDS) * 2 * len(SEEDS) + len(NONE_SEEDS)
+    assert s["n_cases"] == n and not s["skipped"] and not s["skipped_cases"]
+    assert json.loads((out_dir / "summary.json").read_text())["n_cases"] == n
     assert "Confusion" in (out_dir / "report.md").read_text()
-    strong = next(c for c in s["cases"] if c["kind"] == "lead_error_harmonic")
-    # sized to 10 x the noise (per coordinate, noise-free) by a linear scale of the amplitude
-    assert strong["effect_rms_over_sigma"] == pytest.approx(10.0, rel=0.05)
-    assert strong["named"] == "lead_error" and strong["correct"]
-    assert strong["audit_rms_after_mm"] < strong["audit_rms_before_mm"]
-    assert s["confusion"]["lead_error_harmonic"] == {"lead_error": 1}
-    assert s["confusion"]["none"] == {"none": 2}
-    assert s["correct_rate"] == 1.0
-    assert s["false_alarm_rate"] == 0.0
-    assert s["heldout_worse_count"] == 0
+    for c in s["cases"]:
+        if c["kind"] != "none":
+            # sized to the multiplier x the noise (per coordinate, noise-free) by a linear
+            # scale of the amplitude (the inverse for the kinds sized by a time constant)
+            assert c["effect_rms_over_sigma"] == pytest.approx(c["multiplier"], rel=0.05)
+    assert sum(s["confusion"]["none"].values()) == len(NONE_SEEDS)
     # the figures, in the report and in the recording, whose every view has data
     assert set(s["figures"]) == {"confusion", "rate_by_size"}
     report = (out_dir / "report.md").read_text()
@@ -179,6 +195,27 @@ def test_summary_contract_clear_case_and_no_false_alarm(run):
     views = assert_every_face_has_data(out_dir / f"{out_dir.name}.rrd")
     names = {v["name"] for v in views}
     assert {"true x named effect", "right names by size", "report: key numbers"} <= names
+
+
+@pytest.mark.accuracy
+def test_goal_holds_as_a_rate_over_the_cases(run):
+    """The benchmark's goal (right names >= 80 % of the strong cases, false alarms <= 5 % of
+    the geometry-only truths, no audit made worse), judged over the cases as a rate: the gate
+    fails when the counts reject the goal at the 5 % level (binomial tail of a rate exactly at
+    the goal). Absorbed cases count as misses here (the study reports them beside its rate),
+    and "unexplained" on a geometry-only truth is an alarm."""
+    s, _ = run
+    goal = s["goal"]
+    effect = [c for c in s["cases"] if c["kind"] != "none"]
+    right = sum(bool(c["correct"]) for c in effect)
+    assert right / len(effect) == pytest.approx(s["correct_rate_with_absorbed"])
+    tail = binom.cdf(right, len(effect), goal["correct_rate_min"])
+    assert tail >= 0.05, (right, len(effect), s["confusion"])
+    nones = [c for c in s["cases"] if c["kind"] == "none"]
+    alarms = sum(_alarmed(c) for c in nones)
+    tail = binom.sf(alarms - 1, len(nones), goal["false_alarm_rate_max"])
+    assert tail >= 0.05, (alarms, s["confusion"]["none"])
+    assert s["heldout_worse_count"] == goal["heldout_worse_count_max"] == 0
 
 
 def test_confusion_heat_map_counts(tmp_path):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from calib.diagnosis.core import TestSet, diagnose
 from calib.fit.identification import identify
@@ -155,21 +156,59 @@ def test_orientation_dependent_error_is_unexplained(bench):
     _assert_test_not_worse(d)
 
 
+def _decided(bench, commands, joints, sigma: float) -> tuple[bool, bool]:
+    """(excess, named) that the diagnosis must find on the truth driven at ``joints`` while
+    the data record ``commands``, with ``sigma`` declared, decided before the noisy run.
+
+    The geometric fit's residual sum of squares is the part of the effect the geometry
+    cannot absorb (that of the fit of the noise-free readings; a gain candidate removes it
+    whole), plus the true noise's chi-square (mean dof SIGMA^2, standard deviation
+    sqrt(2 dof) SIGMA^2), plus a cross term of standard deviation 2 SIGMA sqrt(effect part).
+    Excess: the chi-square test at the diagnosis's level 0.01. Without excess an effect is
+    named only when its mean-square gain exceeds the diagnosis's within-noise bound
+    3 sigma^2 sqrt(2 / n) (calib.diagnosis.core), that gain carrying the same two spreads
+    per coordinate. Each decision must lie more than four standard deviations from its
+    threshold: the case is decided, whatever the CPU's round-off."""
+    nominal, params, truth, _ = bench
+    clean = forward_batch(truth, joints[:N_CAL], check_stroke=False).targets
+    fit = identify(CalibrationModel(nominal, params), Observations(commands[:N_CAL], clean))
+    n = clean.size
+    dof = n - int(fit.estimated.sum())
+    effect_ss = fit.residual_rms**2 * n
+    sd = np.hypot(np.sqrt(2.0 * dof) * SIGMA**2, 2.0 * SIGMA * np.sqrt(effect_ss))
+    z = (effect_ss + dof * SIGMA**2 - chi2.isf(0.01, dof) * sigma**2) / sd
+    assert abs(z) > 4.0, z
+    if z > 0:
+        return True, True
+    z = (effect_ss / n - 3.0 * sigma**2 * np.sqrt(2.0 / n)) / (sd / n)
+    assert abs(z) > 4.0, z
+    return False, bool(z > 0)
+
+
+# per sigma typed, a size of the gains that decides the case (the gains below at 2/3 left
+# the true sigma's case 2.8 standard deviations above the chi-square's critical value)
+GAIN_SCALE = {0.5: 1.0, 1.0: 1.0, 2.0: 1.0 / 3.0}
+
+
 @pytest.mark.parametrize("factor", [0.5, 1.0, 2.0])
 def test_verdict_is_consistent_with_its_noise_test(bench, factor):
     """No effect is named on noise whatever the sigma typed (a sigma typed too small makes
-    the residual exceed it: "unexplained", nothing named); a real gain error is named as
-    long as the residual exceeds the noise the user declares, and when a sigma typed twice
-    too large makes the residual pass the noise test, a gain within that noise is not."""
+    the residual exceed it: "unexplained", nothing named); a real gain error is named when
+    the residual exceeds the noise the user declares, and a gain within what the noise
+    gives is not: which happens is decided in advance from the gain's part the geometry
+    cannot absorb and the chi-square of the noise (``_decided``)."""
     measured = _twin(bench, [])
     d = _run(bench, measured, sigma=SIGMA * factor, with_test=False)
     assert d.chosen == ("unexplained" if d.excess else "none")
+    if factor != 1.0:  # noise alone, sigma typed 2 x off: its chi-square is 4 or 1/4 x dof
+        assert d.excess == (factor < 1.0)
     assert not d.coefficients
     _, _, _, commands = bench
-    gains = np.array([200, 450, 300, 250, 400, 350]) * 1e-6
-    d = _run(bench, _driven(bench, commands * (1 + gains)), sigma=SIGMA * factor, with_test=False)
-    if d.excess:
-        assert d.chosen == "gain_error"
-    else:
-        assert factor == 2.0 and d.chosen == "none"
-        assert "within what noise gives" in d.reason
+    gains = np.array([300, 675, 450, 375, 600, 525]) * 1e-6 * GAIN_SCALE[factor]
+    joints = commands * (1 + gains)
+    excess, named = _decided(bench, commands, joints, SIGMA * factor)
+    d = _run(bench, _driven(bench, joints), sigma=SIGMA * factor, with_test=False)
+    assert d.excess == excess
+    assert d.chosen == ("gain_error" if named else "none"), d.reason
+    if not named:
+        assert d.reason.startswith("the residual is what the tracker noise explains")

@@ -37,11 +37,13 @@ def _files(case: cases.Case) -> list[str]:
     return ["--model", str(case.model), "--errors", str(case.errors), "--data", str(case.data)]
 
 
-def _held_out_plain(case: cases.Case) -> tuple[float, float]:
-    """Test-set 3D RMS and max of plain least squares (every identifiable parameter)."""
+def _held_out(case: cases.Case, regularise: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Per test pose, the mean squared 3D error (mm^2) of the fit on the calibration rows
+    (the default, or plain least squares: every identifiable parameter), and the fit's
+    parameter values (mm, deg)."""
     model = model_from_files(str(case.model), str(case.errors))
     ds = read_dataset(case.data)
-    run = calibrate(model, ds, "calibration", regularise=False)
+    run = calibrate(model, ds, "calibration", regularise=regularise)
     test, _ = select_set(ds, "test", "verification")
     obs = bind_dataset(model.nominal, test)
     v = verify(
@@ -53,7 +55,23 @@ def _held_out_plain(case: cases.Case) -> tuple[float, float]:
         registration_after=run.result.registration,
         calibration_set=(run.obs.commands, run.obs.measured),
     )
-    return v.after.position.rms_mm, v.after.position.max_mm
+    per_pose = np.mean((v.after.per_reading_m * 1e3) ** 2, axis=1)
+    return per_pose, model.params.to_display(run.result.values)
+
+
+def _as_good_as_plain(case: cases.Case, verified: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The default predicts the test poses as well as plain least squares within their
+    sampling noise: the mean over the poses of the paired difference of squared errors
+    (default - plain) is below twice its standard error (a one-sided test at about 2 %).
+    Returns both fits' parameter values (mm, deg)."""
+    default, shown = _held_out(case, True)
+    plain, plain_shown = _held_out(case, False)
+    # the in-process default is what the command line verified
+    assert np.sqrt(default.mean()) == pytest.approx(verified["after"]["rms_mm"], rel=1e-9)
+    diff = default - plain
+    se = diff.std(ddof=1) / np.sqrt(diff.size)
+    assert diff.mean() <= 2.0 * se, (diff.mean(), se)
+    return shown, plain_shown
 
 
 def _identify_with(capsys, case: cases.Case, diag: Path, out: Path) -> tuple[int, str]:
@@ -99,40 +117,47 @@ def cobot(tmp_path_factory):
 
 def test_few_pose_single_reflector_arm_gets_a_physical_answer(few, capsys, tmp_path):
     result, verified, text = _identify_verify(capsys, few, tmp_path)
-    theta = result["parameters"]["link6.theta"]
     # one reflector: joint 6's zero and the reflector's offset in the plane normal to joint 6
-    # are one direction; the member fixed is the one that keeps the estimates small, and the
-    # reason names its true partner (the reflector's offset), not the registration
-    assert theta["status"] == "fixed"
-    assert "target_1.dy" in theta["reason"]
-    assert "one reflector cannot separate a rotation of joint A6" in theta["reason"]
-    assert result["parameters"]["target_1.dy"]["status"] == "estimated"
+    # are one direction: one of the pair is fixed (the member that keeps the estimates
+    # smaller; the two are within round-off of a tie here, so which one is the CPU's to
+    # decide), the other estimated, and the fixed one's reason names its true partner (the
+    # reflector's offset or the joint's zero), not the registration
+    pair = {n: result["parameters"][n] for n in ("link6.theta", "target_1.dy")}
+    fixed = [n for n, p in pair.items() if p["status"] == "fixed"]
+    assert len(fixed) == 1, pair
+    (other,) = set(pair) - set(fixed)
+    assert pair[other]["status"] == "estimated"
+    assert other in pair[fixed[0]]["reason"]
+    assert "one reflector cannot separate a rotation of joint A6" in pair[fixed[0]]["reason"]
     assert "target_1.dx" not in result["redundant_with_registration"]
     shown = [p["value"] for p in result["parameters"].values()]
     assert max(abs(v) for v in shown) < 2.0  # mm and deg: a built arm's errors
     reg = result["regularisation"]
     assert reg["directions_kept_at_zero"] >= 1 and "regularised" in reg["text"]
     assert "regularised" in text  # the output says what was regularised
-    plain_rms, _ = _held_out_plain(few)
-    assert verified["after"]["rms_mm"] <= plain_rms * (1 + TIE)
+    _as_good_as_plain(few, verified)
     assert verified["after"]["rms_mm"] < 0.8 * verified["before"]["rms_mm"]
 
 
 def test_stewart_platform_seen_through_one_point(stewart, capsys, tmp_path):
     result, verified, _ = _identify_verify(capsys, stewart, tmp_path)
-    reasons = [p.get("reason", "") for p in result["parameters"].values()]
-    # the base joints share the registration's rigid motion: six of them are fixed, each
-    # with its partners and the registration named
-    shared = [r for r in reasons if "base" in r and "tracker registration" in r]
-    assert len(shared) >= 1
-    values = [abs(p["value"]) for p in result["parameters"].values()]
-    assert max(values) < 20.0  # no 30-90 mm along weak directions
+    # the six base joints moved together are the base frame moved: its translation is the
+    # registration's, three directions, so one member per axis is fixed, each with its
+    # partners and the registration named (a common rotation of the base joints moves the
+    # legs' directions, not only the frame: no redundancy)
+    fixed = {n: p["reason"] for n, p in result["parameters"].items() if p["status"] == "fixed"}
+    shared = sorted(n for n, r in fixed.items() if ".base." in n and "tracker registration" in r)
+    assert sorted(n.rsplit(".", 1)[1] for n in shared) == ["dx", "dy", "dz"], fixed
     assert result["regularisation"]["directions_kept_at_zero"] >= 1
     # plain least squares creeps along the weak valley without converging (exit 3); what it
     # reaches predicts the 36 test poses as well as the default does, within their sampling
-    # noise (the cross-validation that chose the default saw 8 % less error than plain)
-    plain_rms, _ = _held_out_plain(stewart)
-    assert verified["after"]["rms_mm"] <= plain_rms * 1.01
+    # noise, with far larger estimates: the default keeps the weak directions at zero
+    # (the minimum-norm solution of the directions it estimates), so its estimates are
+    # smaller than plain's, the largest and all together
+    shown, plain = _as_good_as_plain(stewart, verified)
+    assert [p["value"] for p in result["parameters"].values()] == pytest.approx(shown, abs=1e-9)
+    assert np.linalg.norm(shown) < np.linalg.norm(plain), (shown, plain)
+    assert np.max(np.abs(shown)) < np.max(np.abs(plain)), (shown, plain)
     assert verified["after"]["rms_mm"] < 0.6 * verified["before"]["rms_mm"]
 
 
@@ -149,8 +174,7 @@ def test_a_creeping_stewart_platform_runs_the_loop_with_default_flags(near_home,
     assert "the plain fit did not converge" in text
     # the truncated fit predicts the 36 test poses as well as what plain least squares
     # reached (within their sampling noise), far better than the nominal model
-    plain_rms, _ = _held_out_plain(near_home)
-    assert verified["after"]["rms_mm"] <= plain_rms * 1.01
+    _as_good_as_plain(near_home, verified)
     assert verified["after"]["rms_mm"] < 0.4 * verified["before"]["rms_mm"]
     diag = tmp_path / "d.json"
     code, dtext = _cli(capsys, "diagnose", *files, "--test-set", "test", "--out", diag)

@@ -105,27 +105,38 @@ def test_unreachable_workspace_centre_raises():
         boundary_poses(mech)
 
 
+DRAWS = 8  # noise draws of the quick run: the sets compared over the same draws' means
+
+
 @pytest.mark.accuracy
 def test_optimal_poses_scenario_quick(tmp_path):
     text = (ROOT / "scenarios/studies/optimal_poses/optimal_poses.toml").read_text()
-    text = text.replace("noise_draws = 100", "noise_draws = 2")
+    text = text.replace("noise_draws = 100", f"noise_draws = {DRAWS}")
     text = text.replace("random_starts = 30 ", "random_starts = 2 ")
     text = text.replace('values_file = "truth/', f'values_file = "{ROOT}/scenarios/truth/')
     path = tmp_path / "optimal_quick.toml"
     path.write_text(text)
     s, out = run_scenario(str(path), tmp_path, quiet=True)
-    assert s["n_noise_draws"] == 2
+    assert s["n_noise_draws"] == DRAWS
     # the index by pose count is the report's figure (its plateau marked), static; the
     # selected poses the one timeline
     views = {v["name"] for v in assert_every_face_has_data(out / f"{out.name}.rrd")}
     assert "condition index by pose count" in views
     assert len(s["index_by_count"]) == 40 - 9 + 1
     assert 9 < s["n_optimal"] <= 40
-    for name in ("optimal", "random_same_count", "random_256"):
-        for key in ("param_max_abs_mm", "verify_pos_peak_mm", "verify_ori_peak_deg"):
-            assert s[name][key] is not None and s[name][key] > 0
-    # the selected set is better conditioned than random poses of the same count
-    assert s["optimal"]["index_condition"] < s["random_same_count"]["index_condition"]
+    opt, rand = s["optimal"], s["random_same_count"]
+    assert opt["n_poses"] == rand["n_poses"] == s["n_optimal"]
+    for name in ("optimal", "random_same_count"):
+        assert s[name]["failed_draws"] == 0
+    # the selected set is better conditioned than random poses of the same count (what the
+    # selection minimises) ...
+    assert opt["index_condition"] < rand["index_condition"]
+    # ... and what that is for: identified over the same noise draws (each draw perturbs
+    # every set in turn), the selected poses leave a smaller peak pose error on the
+    # verification grid than random poses of the same count, in position and orientation
+    for key in ("verify_pos_peak_mm", "verify_ori_peak_deg"):
+        assert opt[key] < rand[key], (key, opt[key], rand[key])
+    assert opt["param_max_abs_mm"] < rand["param_max_abs_mm"]
 
 
 def test_candidate_set_with_unreachable_poses_is_refused():

@@ -3,7 +3,9 @@
 The scenario's truth is the paper's experiment regime
 (scenarios/studies/liu_vs_ols/liu_vs_ols.toml): the rows
 that do not depend on the estimator, coarse and OLS, must come out as the paper's Table 5
-(position max and mean within the factor the scenario states, all three layers), and the
+(position max and mean within the factor the scenario states, all three layers): a
+property of the truth chosen for the scenario, disclosed in its TOML; the Liu row is the
+prediction, judged against the noise ceiling of the same run; and the
 loop (diagnosis, the named effect modelled, refit, compensation) below the OLS row.
 """
 
@@ -106,7 +108,13 @@ def test_uncalibrated_row_is_the_raw_machine(summary):
 
 @pytest.mark.accuracy
 def test_coarse_and_ols_rows_match_the_paper(summary):
-    """Table 5, all three layers: coarse 0.166 / 0.083 mm, OLS 0.092 / 0.035 mm (max / mean)."""
+    """Table 5, all three layers: coarse 0.166 / 0.083 mm, OLS 0.092 / 0.035 mm (max / mean).
+
+    This is a calibration of the scenario, not a finding: its truth (the sizes of the random
+    structural errors and of the three effects) was chosen so that these two rows, which do
+    not depend on the estimator, come out as the paper measured them (disclosed in
+    liu_vs_ols.toml, checked there on seeds 2018, 1 and 2). The gate keeps the chosen truth
+    from drifting away from the paper's regime; the Liu row below is the prediction."""
     ours = summary["layers"]["all"]
     for stage in ("coarse", "ols"):
         for q in ("pos_max_mm", "pos_mean_mm"):
@@ -116,13 +124,22 @@ def test_coarse_and_ols_rows_match_the_paper(summary):
 
 
 @pytest.mark.accuracy
-def test_liu_prediction_is_ols_within_five_percent(summary):
-    """The prediction: with the paper's coarse and OLS rows reproduced, Liu (HKB k) does not
-    reproduce the paper's 14 % gain on the test layer; it stays within 5 % of OLS."""
+def test_liu_prediction_is_ols_within_the_noise_ceiling(summary):
+    """The prediction, on the truth chosen for the coarse and OLS rows: Liu (HKB k) does not
+    reproduce the paper's gain on the test layer (0.030 against OLS's 0.035 mm, 14 %).
+
+    The bound is the noise ceiling of the same run: the test-layer mean position error the
+    tracker noise alone leaves after OLS (its Monte Carlo over 10^4 draws). A shrinkage
+    estimator gains by scattering less under the noise, and removing all of the noise's part
+    of each pose's error lowers the mean by at most the mean of that part (triangle
+    inequality): Liu's gain over OLS cannot exceed the ceiling, and the prediction is that it
+    stays within the ceiling of OLS on either side. The paper's 5 um gain is above it."""
     test = summary["layers"]["test"]
-    rel = test["liu"]["pos_mean_mm"] / test["ols"]["pos_mean_mm"] - 1.0
-    assert abs(rel) < 0.05
-    assert rel > 0.030 / 0.035 - 1.0  # not the paper's gain
+    ceiling_mm = summary["noise_only_test_um"]["ols"]["mean"] * 1e-3
+    diff = test["liu"]["pos_mean_mm"] - test["ols"]["pos_mean_mm"]
+    assert abs(diff) < ceiling_mm, (diff, ceiling_mm)
+    paper = PAPER["table5"]
+    assert paper["ols"]["pos_mean_mm"] - paper["liu"]["pos_mean_mm"] > ceiling_mm
 
 
 @pytest.mark.accuracy
@@ -175,12 +192,6 @@ def test_fine_calibration_lowers_the_max_error_in_every_layer(summary):
         stages = summary["layers"][group]
         for est in ("ols", "liu"):
             assert stages[est]["pos_max_mm"] < stages["coarse"]["pos_max_mm"]
-
-
-@pytest.mark.accuracy
-def test_liu_is_more_robust_than_ols(summary):
-    assert summary["eta_percent"] > 0.0
-    assert summary["monte_carlo_runs"] == 10000
 
 
 def test_paper_match_ratios():

@@ -8,9 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from recording_faces import Readback, assert_every_face_has_data
+from scipy.stats import chi2
 
 from calib.cli.commands import main as calib_cli
 from scenarios.runner import run_scenario
+from twin.mechanism import Mechanism
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -39,10 +41,18 @@ def test_summary_contract_and_loop_closed(run):
     assert all(-1.0 <= v <= 1.0 for v in s["residual_structure"].values())
     # the loop closes: the residual falls to the tracker noise ...
     assert s["residual_rms_before_mm"] > 2 * s["noise_floor_rms_mm"]
-    # the twin's warm-up grows the legs' joint offsets too, which the diagnosis's growth
-    # candidate (proportional to the command) cannot express: what remains is measured at
-    # 1.16 x the noise, against 2.25 x before; 1.25 x is the gate
-    assert s["residual_rms_after_mm"] < 1.25 * s["noise_floor_rms_mm"]
+    # ... but not all the way: the twin's warm-up grows the legs' joint offsets too, which
+    # the diagnosis's growth candidate (proportional to the command) cannot express. Pure
+    # noise on the n calibration coordinates leaves a mean square of sigma^2 chi2(dof) / n
+    # (dof <= n), below sigma^2 chi2.isf(0.001, n) / n but for one run in a thousand: what
+    # remains is above that, a remainder the report must not call noise ...
+    sigma = s["noise_floor_rms_mm"]
+    n = 3 * 80 * Mechanism.from_xml(ROOT / "models/hexapod_rrrprr.xml").n_targets
+    after, before = s["residual_rms_after_mm"], s["residual_rms_before_mm"]
+    assert after**2 > sigma**2 * chi2.isf(0.001, n) / n
+    # ... and the named effects take the larger part of the excess over the noise: the
+    # mean square above sigma^2 after the loop is less than half of what it was before
+    assert after**2 - sigma**2 < 0.5 * (before**2 - sigma**2)
     # ... and poses not used to fit are predicted better
     before, after = s["test"]["before"], s["test"]["after"]
     for q in ("pos_max_mm", "pos_mean_mm", "ori_max_deg", "ori_mean_deg"):

