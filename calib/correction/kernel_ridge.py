@@ -23,6 +23,11 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 MAX_TRAINING_POSES = 1500
+# ... and at most this many in each cross-validation fold's fit, which only chooses the length
+# scale and the ratio: 35 eigendecompositions of its kernel (5 folds x 7 length scales) cost
+# n^3 each, 17 of an 8,000-pose diagnosis's 40 s at 1,500; every campaign of up to 1,250 poses
+# (folds of 1,000) is cross-validated on all of them, as before
+CV_TRAINING_POSES = 1000
 BLOCK = 512  # poses evaluated at once
 # length scales, in units of the features' standard deviation (times sqrt of their count),
 # and noise-to-signal variance ratios the cross-validation chooses from
@@ -161,7 +166,7 @@ def cross_validate(
     distance = np.zeros(len(z))
     for f in np.unique(labels):
         test = labels == f
-        tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)))]
+        tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)), CV_TRAINING_POSES)]
         zt, yt = z[tr_idx], y[tr_idx]
         d2_tt, d2_vt = sq_dist(zt, zt), sq_dist(z[test], zt)
         distance[test] = np.sqrt(np.min(d2_vt, axis=1))
