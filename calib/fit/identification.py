@@ -175,16 +175,18 @@ def identify(
         res = plain
         if choice.basis is not None:
             res = _identify(
-                model, obs, x0, unidentifiable, options, robust, robust_options, None, choice.basis
-            )
+                model, obs, x0, unidentifiable, options, robust, robust_options, None,
+                choice.basis, (plain.report, plain.redundant_with_registration),
+            )  # fmt: skip
         if res.converged or plain.converged:
             return replace(res, subspace=choice)
         # no converged answer: the plain fit crept along its weak directions; the mildest
         # truncation that converges, fitted from the start (calib.fit.regularisation)
         for creep in creeping_cuts(plain.fit_jacobian, plain.fit_residual, ranges):
             res = _identify(
-                model, obs, x0, unidentifiable, options, robust, robust_options, None, creep.basis
-            )
+                model, obs, x0, unidentifiable, options, robust, robust_options, None,
+                creep.basis, (plain.report, plain.redundant_with_registration),
+            )  # fmt: skip
             if res.converged:
                 return replace(res, subspace=creep)
         return replace(plain, subspace=choice)
@@ -241,7 +243,18 @@ def _analyse(
     return replace(report, unidentifiable=why), redundant
 
 
-def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, prior, basis=None):
+def _identify(
+    model,
+    obs,
+    x0,
+    unidentifiable,
+    options,
+    robust,
+    robust_options,
+    prior,
+    basis=None,
+    analysed=None,
+):
     n = model.n_parameters
     names = model.params.names
     x_start = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
@@ -271,7 +284,9 @@ def _identify(model, obs, x0, unidentifiable, options, robust, robust_options, p
     if probe is not None:
         rot0 = None if reg0 is None else reg0.rotation
         r0 = interleave(r0, probe.residual(model.mechanism(x_start), first.qpos, rot0), n_poses)
-    report, redundant = _analyse(
+    # a refit in a subspace of the plain fit's parameters takes the plain fit's analysis (the
+    # same start: a rank decided again from a differently warm-started Jacobian can differ)
+    report, redundant = analysed or _analyse(
         jac0, names, jreg0, r0, ranges, model.nominal, model.params.parameters
     )
     if report.n_identifiable < n and unidentifiable == "raise":

@@ -21,7 +21,7 @@ from calib.diagnosis.gravity import GravityLoads, gravity_loads
 from calib.fit.actuator_gains import ColumnPlan, GainMap
 from calib.fit.joint_compliance import ComplianceMap, Settled, settle
 from calib.fit.kinds import OffsetMap, PoseState
-from twin.exceptions import ModelError
+from twin.exceptions import ClosureError, ModelError
 from twin.kinematics.batch import forward_batch
 from twin.kinematics.sensitivity_batch import (
     JacobianPlan,
@@ -234,15 +234,31 @@ class CalibrationModel:
         start = self._warm[1] if self._warm is not None and self._warm[0] == key else None
         mech = self.mechanism(values)
         if self.params.is_geometry:
-            sol = forward_batch(mech, commands, start=start)
+            sol = self._closed(mech, commands, start, True)
         else:
             q = self._checked_joints(mech, values, commands)
             if self.compliance is None:
-                sol = forward_batch(mech, q, start=start, check_stroke=False)
+                sol = self._closed(mech, q, start, False)
             else:
                 sol = self._settle(values, q, start).solution
         self._warm = (key, sol.qpos)
         return Prediction(targets=sol.targets, qpos=sol.qpos, commands=commands)
+
+    def _closed(self, mech: Mechanism, q: np.ndarray, start, check_stroke: bool):
+        """forward_batch; where its start leaves a pose unclosed (a stall on the far side of
+        it), again from the predictor's start and from the nominal machine's own solution of
+        the same commands (a polisher pose stalled at 2e-11 m from a warm start)."""
+        try:
+            return forward_batch(mech, q, start=start, check_stroke=check_stroke)
+        except ClosureError:
+            if start is None:
+                start = forward_batch(self.nominal, q, check_stroke=False).qpos
+            else:  # a warm start from other values: the predictor's own start
+                try:
+                    return forward_batch(mech, q, check_stroke=check_stroke)
+                except ClosureError:
+                    start = forward_batch(self.nominal, q, check_stroke=False).qpos
+        return forward_batch(mech, q, start=start, check_stroke=check_stroke)
 
     def _checked_joints(
         self, mech: Mechanism, values: np.ndarray, commands: np.ndarray
