@@ -1,6 +1,6 @@
 """The documented cluster path for real: a Ray head started with ``ray start --head`` (token
 authentication on, as Ray 2.60 starts it), a two-run sweep through ``RAY_ADDRESS`` with the
-head's token shared the way the README says, and the head stopped again.
+head's token shared the way the user guide (docs/guide.md) says, and the head stopped again.
 
 Loopback only (127.0.0.1, free ports), its own temporary directory and token file (the
 machine's ``~/.ray/auth_token`` is left alone), bounded in time; the head is started with
@@ -67,7 +67,7 @@ def test_a_sweep_through_ray_address_on_a_token_authenticated_head(tmp_path):
     token = work / "auth_token"
     token.write_text(uuid.uuid4().hex)
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
-    # the head's token, shared with the driver as the README says: the same file everywhere
+    # the head's token, shared with the driver as the user guide says: the same file everywhere
     env |= {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN_PATH": str(token)}
     env.pop("PKM_ENGINE", None)
     port = _free_port()

@@ -117,7 +117,7 @@ def _auth_hint(exc: Exception) -> str:
     return (
         "\n  the cluster uses token authentication: run with RAY_AUTH_MODE=token and the "
         "head's token (its ~/.ray/auth_token copied to this machine, RAY_AUTH_TOKEN_PATH or "
-        "RAY_AUTH_TOKEN); see the README, 'Sweeps on a cluster'"
+        "RAY_AUTH_TOKEN); see docs/guide.md, 'Sweeps on a cluster'"
     )
 
 
