@@ -143,7 +143,7 @@ def test_absorbed_cases_are_counted_beside_the_rate_not_in_it():
 
 
 def test_absorbed_sentence_follows_the_counts():
-    """"As misses" counts only the rate's own right names over all strong cases; an absorbed
+    """ "As misses" counts only the rate's own right names over all strong cases; an absorbed
     case named right counts in the second rate only (the benchmark once printed 88 % for
     29 of 34 = 85 %). Other counts move the sentence."""
     from scenarios.studies.diagnosis_benchmark.report import absorbed_sentence
