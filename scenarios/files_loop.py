@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from calib.cli import main as calib_main
+from scenarios.results_folder import final_paths
 
 
 def _run(args: list[str], log: io.StringIO, said: dict[str, str]) -> int:
@@ -72,7 +73,8 @@ def loop_through_files(
         scored = str(test_data if test_data is not None else data)
         verify = [*files, "--data", scored, "--result", str(r), "--set", "test"]
         codes["verify"] = _run(["verify", *verify, "--out", str(v.with_suffix(".json"))], log, why)
-    (out_dir / "commands.log").write_text(log.getvalue())
+    # the paths as they are after the run's folder is swapped in
+    (out_dir / "commands.log").write_text(final_paths(log.getvalue()))
     diag = json.loads(d.read_text()) if d.is_file() else {}
     geometric = _rms(d, "test", "before", "rms_mm")
     reached = _rms(d, "test", "after", "rms_mm")
