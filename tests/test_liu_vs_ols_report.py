@@ -227,3 +227,27 @@ def test_the_regime_report_says_where_each_estimator_wins(regime_summary):
     text = regime_report(regime_summary)
     assert "the paper's estimator gains 0.5 um" in text
     assert "in 2 of 2 cells" in text
+
+
+def test_a_residual_within_the_noise_after_the_refit_is_no_effect():
+    """The diagnosis reads the one-step fine OLS; when it modelled nothing and the nonlinear
+    refit passes the chi-square noise test (p >= 0.01, the diagnosis's own level), the loop
+    says "none" (the geometry-only control once said "unexplained" at 0.0085 mm against a
+    floor of 0.0087 mm); below the level, or with an effect modelled, the diagnosis's word."""
+    from scenarios.studies.liu_vs_ols.loop import NOISE_ALPHA, chi_square_p, loop_verdict
+
+    assert NOISE_ALPHA == 0.01
+    chosen, why = loop_verdict("unexplained", "it exceeds", False, 0.353, 0.0085, 0.0087)
+    assert chosen == "none"
+    assert "leaves 0.0085 mm against the noise floor 0.0087 mm" in why
+    assert "chi-square p = 0.353 >= 0.01" in why
+    assert loop_verdict("unexplained", "it exceeds", False, 0.009, 0.0095, 0.0087) == (
+        "unexplained",
+        "it exceeds",
+    )
+    assert loop_verdict("backlash", "lowers", True, 0.5, 0.0086, 0.0087) == ("backlash", "lowers")
+    assert loop_verdict("none", "noise", False, 0.5, 0.0086, 0.0087) == ("none", "noise")
+    # chi-square: a sum of squares at its expectation (dof sigma^2) for many dof is p ~ 0.5;
+    # 20 % above it with dof = 1000 is ~4.5 standard deviations (sqrt(2 dof) = 44.7): p < 1e-5
+    assert chi_square_p(1000 * 0.005**2, 0.005, 1000) == pytest.approx(0.494, abs=0.003)
+    assert chi_square_p(1200 * 0.005**2, 0.005, 1000) < 1e-5
