@@ -217,16 +217,71 @@ def regime_summary() -> dict:
 
 def test_the_regime_report_says_where_each_estimator_wins(regime_summary):
     text = regime_report(regime_summary)
-    assert "the paper's estimator loses 0.07 um" in text
+    assert "the paper's estimator minus OLS in the test mean is +0.07 um (median; no better" in text
     assert "in 1 of 2 cells: interpolated/0.05." in text
-    assert "The largest median gain is 2 um (4.9% of OLS's 41 um there)" in text
+    assert "The lowest median is -2 um (4.9% of OLS's 41 um there)" in text
     regime_summary["cells"]["interpolated/0.005"]["estimators"]["liu_paper_deg"] = {
         "minus_ols_um": {"median": -0.5, "p05": -1, "p95": 0},
         "better_fraction": 0.97,
     }
     text = regime_report(regime_summary)
-    assert "the paper's estimator gains 0.5 um" in text
+    assert "the paper's estimator minus OLS in the test mean is -0.5 um (median; better" in text
     assert "in 2 of 2 cells" in text
+
+
+def test_the_regime_tables_give_the_maximum_and_one_sign(regime_summary):
+    """The test maximum beside the mean (the paper's Liu gain was in the maximum; a mean that
+    wins can come with a maximum that loses), and the heat maps' numbers are the tables'
+    (estimator minus OLS, below 0 better)."""
+    from scenarios.studies.liu_regime.figures import minus_ols_grid
+
+    cell = regime_summary["cells"]["interpolated/0.05"]
+    cell["ols_test_pos_max_um"] = {"median": 97.0}
+    e = cell["estimators"]["liu_paper_deg"]
+    e["minus_ols_max_um"] = {"median": 5.5, "p05": 3.0, "p95": 8.0}
+    e["better_fraction_max"] = 0.1
+    text = regime_report(regime_summary)
+    assert "| interpolated/0.05 | 41 | 97 | -2 (-3..-1), 95% | +5.5 (+3..+8), 10% |" in text
+    assert "| interpolated/0.005 | 36 | n/a | +0.07 (-0.93..+1.07), 15% | n/a |" in text
+    assert "(better in 95% of draws); in the test maximum +5.5 um (better in 10%)." in text
+    assert "One sign everywhere, tables, sentences and heat maps: estimator minus OLS" in text
+    regime_summary.update(placements=["interpolated"], sigmas_mm=[0.005, 0.05])
+    diff, better = minus_ols_grid(regime_summary, "liu_paper_deg")
+    assert diff.tolist() == [[0.07, -2.0]] and better.tolist() == [[0.15, 0.95]]
+
+
+def test_the_bias_sentence_follows_the_noise_free_cells(regime_summary):
+    """ "Shrinkage does not remove such a bias" only where the noise-free cells (sigma 0) show
+    no estimator better than OLS; where one is (the paper's Liu gained 3.4 um in the tilted
+    cell at sigma 0), the sentence says the bias moved."""
+    from scenarios.studies.liu_vs_ols.sentences import bias_clause
+
+    def free(diff: float, better: float) -> dict:
+        e = {"minus_ols_um": {"median": diff, "p05": diff - 1, "p95": diff + 1}}
+        return {
+            "n_draws": 20,
+            "ols_test_pos_mean_um": {"median": 30.0},
+            "estimators": {"liu_paper_deg": {**e, "better_fraction": better}},
+        }
+
+    assert "no noise-free cell" in bias_clause({})
+    reg = {"cells": {"tilted/0": free(-3.4, 0.9), "tilted/0.005": free(1.0, 0.2)}}
+    said = bias_clause(reg)
+    assert said.startswith("shrinking the estimate can move such a bias")
+    assert "`liu_paper_deg` minus OLS -3.4 um in tilted (median; better in 90% of draws)" in said
+    reg["cells"]["tilted/0"] = free(0.8, 0.1)
+    said = bias_clause(reg)
+    assert said.startswith("shrinking the estimate does not remove such a bias")
+    assert "(lowest: `liu_paper_deg` minus OLS +0.8 um in tilted" in said
+    s = summary()
+    s["regime"] = {"source": "liu_regime/summary.json", "sigmas_mm": [0.0], **reg}
+    assert "describes; shrinking the estimate does not remove such a bias: noise-free" in report(s)
+    regime_summary["cells"]["tilted/0"] = free(-3.4, 0.9)
+    text = regime_report(regime_summary)
+    assert "Noise-free (sigma 0), where shrinkage has no noise to take off" in text
+    assert "`liu_paper_deg (paper's Liu)` in tilted -3.4 um (90% better): what shrinkage" in text
+    del regime_summary["cells"]["tilted/0"]
+    assert "Noise-free" not in regime_report(regime_summary)
 
 
 def test_a_residual_within_the_noise_after_the_refit_is_no_effect():
