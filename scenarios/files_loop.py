@@ -111,6 +111,19 @@ def files_loop_sentence(f: dict[str, Any] | None, in_process_mm: float | None = 
         return ""
     codes = f["exit_codes"]
     said = ", ".join(f"{c} exit {'-' if x is None else x}" for c, x in codes.items())
+    if codes["diagnose"] == 0 and f.get("named_effect") == "none":
+        geometric = f["test_rms_mm"]["geometric_fit"]
+        return (
+            f"Through the files ({said}; {f['files']}/commands.log): diagnose named no effect "
+            f"(none), so identify --with has nothing to add"
+            + (f" and says so (exit {codes['identify']})" if codes["identify"] else "")
+            + (
+                ""
+                if geometric is None
+                else f"; the geometric fit's test RMS is {geometric:.4f} mm (3D per reading)"
+            )
+            + "."
+        )
     if codes["diagnose"] != 0 or codes["verify"] is None:
         reasons = "; ".join(f"{c}: {w}" for c, w in (f.get("failed_because") or {}).items())
         return (

@@ -307,3 +307,23 @@ def test_a_residual_within_the_noise_after_the_refit_is_no_effect():
     # tail of 4e-6, the chi-square's right tail heavier but below 1e-4
     assert chi_square_p(1000 * 0.005**2, 0.005, 1000) == pytest.approx(0.494, abs=0.003)
     assert 4e-6 < chi_square_p(1200 * 0.005**2, 0.005, 1000) < 1e-4
+
+
+def test_the_files_loop_sentence_says_nothing_was_named():
+    """diagnose naming "none" leaves identify --with nothing to add: no "the loop did not
+    close", and the geometric fit's test RMS from the files."""
+    from scenarios.files_loop import files_loop_sentence
+
+    f = {
+        "exit_codes": {"diagnose": 0, "identify": 2, "verify": None},
+        "failed_because": {"identify": "error: it named no effect (none)"},
+        "named_effect": "none",
+        "test_rms_mm": {"geometric_fit": 0.0071, "diagnosis": 0.0071, "with_effect": None},
+        "files": "loop_through_files",
+    }
+    text = files_loop_sentence(f)
+    assert "diagnose named no effect (none), so identify --with has nothing to add" in text
+    assert "says so (exit 2); the geometric fit's test RMS is 0.0071 mm" in text
+    assert "did not close" not in text
+    f["named_effect"], f["exit_codes"]["diagnose"] = None, 2
+    assert "the loop did not close" in files_loop_sentence(f)
