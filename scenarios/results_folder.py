@@ -31,6 +31,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from common.atomic_files import write_text_atomic
 from common.file_locks import drop, is_free, lock_path, take
 
 DIR_MODE = 0o755
@@ -84,6 +85,24 @@ def final_paths_in(value: Any) -> Any:
     if isinstance(value, tuple):
         return tuple(final_paths_in(v) for v in value)
     return value
+
+
+TEXT_SUFFIXES = (".json", ".log", ".md", ".txt")  # files a run writes that may name paths
+
+
+def name_final_paths(folder: Path) -> list[Path]:
+    """:func:`final_paths` on every text file under the run's ``folder`` (what the command
+    line wrote there names its inputs and outputs by the partial folder), each rewritten
+    atomically; returns the files changed."""
+    changed = []
+    for path in sorted(folder.rglob("*")):
+        if path.suffix not in TEXT_SUFFIXES or not path.is_file():
+            continue
+        text = path.read_text(encoding="utf-8")
+        if f".{PARTIAL}-" in text and (new := final_paths(text)) != text:
+            write_text_atomic(path, new)
+            changed.append(path)
+    return changed
 
 
 def leftovers(out_dir: Path, kind: str) -> list[Path]:

@@ -354,3 +354,22 @@ def test_final_paths_name_the_run_folder_by_its_final_name():
         assert final_paths(kept) == kept
     nested = {"k": ["/r/.a.partial-abcdefgh/f", 1.5, ("/r/.a.partial-abcdefgh",)], "n": None}
     assert final_paths_in(nested) == {"k": ["/r/a/f", 1.5, ("/r/a",)], "n": None}
+
+
+def test_name_final_paths_rewrites_the_text_files_only(tmp_path):
+    from scenarios.results_folder import name_final_paths
+
+    run = tmp_path / ".arm.partial-abcd1234"
+    (run / "sub").mkdir(parents=True)
+    said = f'{{"data": "{run}/d.csv"}}'
+    (run / "r.json").write_text(said)
+    (run / "sub" / "c.log").write_text(f"$ pkm-calib verify --out {run}/v.json\n")
+    (run / "ok.md").write_text("nothing to change")
+    (run / "x.rrd").write_bytes(said.encode())  # a recording is no text: left as it was
+    changed = name_final_paths(run)
+    assert [p.name for p in changed] == ["r.json", "c.log"]
+    assert (run / "r.json").read_text() == f'{{"data": "{tmp_path}/arm/d.csv"}}'
+    assert (
+        run / "sub" / "c.log"
+    ).read_text() == f"$ pkm-calib verify --out {tmp_path}/arm/v.json\n"
+    assert (run / "x.rrd").read_bytes() == said.encode()

@@ -100,4 +100,9 @@ def test_logs_and_summary_name_the_final_folder(arm_run):
         outs += [words[i + 1] for i, w in enumerate(words[:-1]) if w == "--out"]
     assert outs and all(Path(p).exists() for p in outs), outs
     assert all(Path(p).parent == out for p in outs if "datasets" not in p)
-    assert ".partial-" not in (out / "summary.json").read_text()
+    # and the files the command line wrote (results, verify reports) name their inputs so too
+    for written in [*out.rglob("*.json"), *out.rglob("*.md")]:
+        assert ".partial-" not in written.read_text(), written.name
+    result = json.loads((out / "one_reflector_result.json").read_text())
+    named = [v for v in json.dumps(result).split('"') if v.endswith("one_reflector.csv")]
+    assert named and all(Path(v).is_file() for v in named), named
