@@ -213,7 +213,12 @@ def regime_sentences(s: dict[str, Any]) -> list[str]:
         out += (
             f" In the paper's cell ({PAPER_CELL}) over {here['n_draws']} truth draws the "
             f"paper's estimator minus OLS is {paper['minus_ols_um']['median']:+.3g} um "
-            f"(median), better in {paper['better_fraction']:.0%} of draws."
+            f"(median), better in {paper['better_fraction']:.0%} of draws"
+            + (
+                f"; in the test maximum {paper['minus_ols_max_um']['median']:+.3g} um."
+                if paper.get("minus_ols_max_um")
+                else "."
+            )
         )
     for label, name in (("liu_paper_deg", "the paper's Liu"), ("liu", "the HKB Liu")):
         mine = {c: v["estimators"][label] for c, v in cells.items() if label in v["estimators"]}
