@@ -74,9 +74,8 @@ def verdict_sentences(s: dict[str, Any]) -> list[str]:
         diff = paper["minus_ols_um"]["median"]
         out.append(
             f"In the paper's cell ({PAPER_CELL}) the paper's estimator minus OLS in the test "
-            f"mean is {diff:+.3g} um (median; "
-            + ("better" if diff < 0 else "no better")
-            + f"; better in {paper['better_fraction']:.0%} of draws){_in_max(paper)}."
+            f"mean is {diff:+.3g} um (median; better in {paper['better_fraction']:.0%} "
+            f"of draws){_in_max(paper)}."
         )
     for label in s["estimators"]:
         wins = [
