@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from calib.cli import main as calib_main
+from scenarios.results_folder import final_paths
 
 
 def _run(args: list[str], log: io.StringIO, said: dict[str, str]) -> int:
@@ -72,7 +73,8 @@ def loop_through_files(
         scored = str(test_data if test_data is not None else data)
         verify = [*files, "--data", scored, "--result", str(r), "--set", "test"]
         codes["verify"] = _run(["verify", *verify, "--out", str(v.with_suffix(".json"))], log, why)
-    (out_dir / "commands.log").write_text(log.getvalue())
+    # the paths as they are after the run's folder is swapped in
+    (out_dir / "commands.log").write_text(final_paths(log.getvalue()))
     diag = json.loads(d.read_text()) if d.is_file() else {}
     geometric = _rms(d, "test", "before", "rms_mm")
     reached = _rms(d, "test", "after", "rms_mm")
@@ -109,6 +111,19 @@ def files_loop_sentence(f: dict[str, Any] | None, in_process_mm: float | None = 
         return ""
     codes = f["exit_codes"]
     said = ", ".join(f"{c} exit {'-' if x is None else x}" for c, x in codes.items())
+    if codes["diagnose"] == 0 and f.get("named_effect") == "none":
+        geometric = f["test_rms_mm"]["geometric_fit"]
+        return (
+            f"Through the files ({said}; {f['files']}/commands.log): diagnose named no effect "
+            f"(none), so identify --with has nothing to add"
+            + (f" and says so (exit {codes['identify']})" if codes["identify"] else "")
+            + (
+                ""
+                if geometric is None
+                else f"; the geometric fit's test RMS is {geometric:.4f} mm (3D per reading)"
+            )
+            + "."
+        )
     if codes["diagnose"] != 0 or codes["verify"] is None:
         reasons = "; ".join(f"{c}: {w}" for c, w in (f.get("failed_because") or {}).items())
         return (

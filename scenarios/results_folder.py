@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import re
 import secrets
 import shutil
 import sys
@@ -28,7 +29,9 @@ import tempfile
 from collections.abc import Callable, Iterator
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
+from common.atomic_files import write_text_atomic
 from common.file_locks import drop, is_free, lock_path, take
 
 DIR_MODE = 0o755
@@ -37,6 +40,12 @@ LOCK_TIMEOUT_S = 60.0  # a swap takes milliseconds; a lock held longer is a stuc
 PARTIAL, COMPLETE, OLD = "partial", "complete", "old"
 
 Notify = Callable[[str], None]
+# a path component ``.<name>.partial-XXXXXXXX`` (mkdtemp's suffix: 8 of [a-z0-9_]), at the
+# start of the text or after a separator, a space, a quote or an equals sign
+_PARTIAL_COMPONENT = re.compile(
+    rf"(?<![^/\\\s'\"=])\.([^/\\\s'\"]+)\.{PARTIAL}-[a-z0-9_]{{8}}(?=[/\\\s'\":]|$)",
+    re.MULTILINE,
+)
 
 
 class ResultsWriteError(OSError):
@@ -56,6 +65,44 @@ def _umask() -> int:
 def sibling(out_dir: Path, kind: str) -> Path:
     """A new hidden sibling name ``.<name>.<kind>-XXXXXXXX`` of ``out_dir``."""
     return out_dir.parent / f".{out_dir.name}.{kind}-{secrets.token_hex(4)}"
+
+
+def final_paths(text: str) -> str:
+    """``text`` with every run folder ``.<name>.partial-XXXXXXXX`` named by its final name
+    ``<name>``: what a log or a summary written during the run says of paths in its own
+    folder, as they are after the swap (the partial folder no longer exists then)."""
+    return _PARTIAL_COMPONENT.sub(r"\1", text)
+
+
+def final_paths_in(value: Any) -> Any:
+    """:func:`final_paths` on every string of a JSON-like value (dicts, lists, strings)."""
+    if isinstance(value, str):
+        return final_paths(value)
+    if isinstance(value, dict):
+        return {k: final_paths_in(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [final_paths_in(v) for v in value]
+    if isinstance(value, tuple):
+        return tuple(final_paths_in(v) for v in value)
+    return value
+
+
+TEXT_SUFFIXES = (".json", ".log", ".md", ".txt")  # files a run writes that may name paths
+
+
+def name_final_paths(folder: Path) -> list[Path]:
+    """:func:`final_paths` on every text file under the run's ``folder`` (what the command
+    line wrote there names its inputs and outputs by the partial folder), each rewritten
+    atomically; returns the files changed."""
+    changed = []
+    for path in sorted(folder.rglob("*")):
+        if path.suffix not in TEXT_SUFFIXES or not path.is_file():
+            continue
+        text = path.read_text(encoding="utf-8")
+        if f".{PARTIAL}-" in text and (new := final_paths(text)) != text:
+            write_text_atomic(path, new)
+            changed.append(path)
+    return changed
 
 
 def leftovers(out_dir: Path, kind: str) -> list[Path]:

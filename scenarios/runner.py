@@ -18,7 +18,13 @@ from common.atomic_files import write_json_atomic, write_text_atomic
 from scenarios.config import REPO_ROOT, Scenario, ScenarioError, load_scenario
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
-from scenarios.results_folder import KEPT, ResultsWriteError, replaced_whole
+from scenarios.results_folder import (
+    KEPT,
+    ResultsWriteError,
+    final_paths_in,
+    name_final_paths,
+    replaced_whole,
+)
 from scenarios.studies import STUDIES
 
 __all__ = [
@@ -85,8 +91,11 @@ def run_scenario(
                 summary = run(scenario, work, progress, recorder, **options)
             if rrd is not None:
                 summary["recording"] = rrd.name
+            # paths into the run's folder as they are after the swap (its final name)
+            summary = final_paths_in(summary)
             write_json_atomic(work / "summary.json", summary)
             write_text_atomic(work / "report.md", report(summary))
+            name_final_paths(work)  # the files the command line wrote during the run
     except KeyboardInterrupt as exc:
         if isinstance(exc, RunInterrupted):
             raise

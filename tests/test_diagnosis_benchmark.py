@@ -142,6 +142,30 @@ def test_absorbed_cases_are_counted_beside_the_rate_not_in_it():
     assert s["heldout_worse_count"] == 0
 
 
+def test_absorbed_sentence_follows_the_counts():
+    """ "As misses" counts only the rate's own right names over all strong cases; an absorbed
+    case named right counts in the second rate only (the benchmark once printed 88 % for
+    29 of 34 = 85 %). Other counts move the sentence."""
+    from scenarios.studies.diagnosis_benchmark.report import absorbed_sentence
+    from scenarios.studies.diagnosis_benchmark.study import aggregate
+
+    right = [_case("backlash", "backlash") for _ in range(3)]
+    absorbed = [
+        _case("gravity_compliance", "gravity_compliance", absorbed=True, p=0.4),
+        _case("actuator_gain", "none", absorbed=True, p=0.3),
+    ]
+    s = aggregate(right + absorbed)
+    text = absorbed_sentence(s)
+    # 3 right of 3 + 2 = 5: 60 %; with the absorbed case named right, 4 of 5 = 80 %
+    assert "as misses the rate would be 3/5 = 60 %" in text, text
+    assert "(1 of 2 named right), 4/5 = 80 %" in text, text
+    s = aggregate([*right, _case("lead_error", "none"), *absorbed[1:]])
+    text = absorbed_sentence(s)
+    assert "as misses the rate would be 3/5 = 60 %" in text, text
+    assert "(0 of 1 named right), 3/5 = 60 %" in text, text
+    assert absorbed_sentence(aggregate(right)) == "no case to count as a miss"
+
+
 def test_every_twin_effect_has_a_mapping_and_a_scaled_argument():
     assert set(EFFECTS) <= set(ACCEPTED) and set(EFFECTS) <= set(SCALED) <= set(ACCEPTED)
     assert set(SCALED) == set(EFFECT_TYPES)

@@ -106,3 +106,52 @@ def test_the_noise_free_sentence_follows_the_recovery():
     short = {**other_root, "residual_rms_mm": 0.01}
     assert "stopped short" in noise_free_sentence(short)
     assert "54 equations" in noise_free_sentence(exact)
+
+
+def _optimal_summary(n_optimal: int, n_exchange: int) -> dict:
+    """The optimal_poses summary's fields the report reads, with the counts given."""
+    row = {
+        "n_poses": n_optimal,
+        "index_condition": 10.0,
+        "param_max_abs_mm": 0.01,
+        "verify_pos_peak_mm": 0.02,
+        "verify_ori_peak_deg": 0.004,
+        "failed_draws": 0,
+    }
+    return {
+        "index": "condition",
+        "n_optimal": n_optimal,
+        "n_noise_draws": 3,
+        "optimal": row,
+        "exchange": {**row, "n_poses": n_exchange},
+        "random_same_count": row,
+        "random_256": {**row, "n_poses": 256},
+        "paper_table4": {
+            "random_256": {"pos_peak_mm": 0.028, "ori_peak_deg": 0.0069},
+            "optimal_29": {"pos_peak_mm": 0.0212, "ori_peak_deg": 0.0047},
+            "n_optimal": 29,
+        },
+        "index_counts": [9, 10],
+        "index_by_count": [5.0, 4.0],
+    }
+
+
+def test_optimal_poses_report_says_the_counts_it_ran():
+    """The exchange design's count is the greedy set's (22 in the shipped run), not the
+    paper's 29; the figure's title says how many of the starts it draws."""
+    from scenarios.studies.optimal_poses.report import index_figure_title
+    from scenarios.studies.optimal_poses.report import report as poses_report
+
+    text = poses_report(_optimal_summary(22, 22))
+    assert "started from the greedy set, at the greedy selection's count, 22 poses" in text
+    assert "the paper's optimal set has 29." in text
+    assert "same count as the paper" not in text
+    text = poses_report(_optimal_summary(29, 31))
+    assert "at 31 poses (the greedy selection stops at 29)" in text
+    assert "the paper's optimal set has 29." in text
+    text = poses_report(_optimal_summary(29, 29))
+    assert "the paper's optimal set has the same 29." in text
+    assert index_figure_title("condition", 30, 5) == (
+        "hexapod: condition index of the greedy selection (the best of 30; 5 of 30 starts drawn)"
+    )
+    assert index_figure_title("d_optimality", 4, 4).endswith("(the best of 4; all 4 starts drawn)")

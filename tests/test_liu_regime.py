@@ -139,6 +139,9 @@ def test_aggregate_cells_differences_and_fractions():
     assert liu["better_fraction"] == pytest.approx(7 / 10)  # i = 0..6 below OLS
     assert liu["minus_ols_um"]["median"] == pytest.approx(-0.2, abs=1e-9)  # (4.5 - 6.5) 0.1 um
     assert liu["minus_ols_max_um"]["median"] == pytest.approx(-0.4, abs=1e-9)
+    assert liu["better_fraction_max"] == pytest.approx(7 / 10)  # the max is twice the mean
+    # OLS's max 2 x (40 + 0.1 i) um: median over i = 0..9 is 2 x 40.45
+    assert c["ols_test_pos_max_um"]["median"] == pytest.approx(80.9, abs=1e-9)
 
 
 def test_bad_placements_are_refused(tmp_path):

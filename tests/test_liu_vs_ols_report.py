@@ -171,6 +171,9 @@ def test_the_regime_pointer_reads_the_map():
     text = report(s)
     assert "With the lost motion of the joints (backlash), the paper's Liu minus OLS" in text
     assert "+0.07 um (median), better in 15% of draws" in text
+    cell["estimators"]["liu_paper_deg"]["minus_ols_max_um"] = {"median": 4.2}
+    assert "better in 15% of draws; in the test maximum +4.2 um." in report(s)
+    del cell["estimators"]["liu_paper_deg"]["minus_ols_max_um"]
     assert "test layer by tracker noise (median, and the share of draws it is better): " in text
     assert "0.005 mm: +0.07 um (15%)." in text
     assert "geometry-only" not in text
@@ -217,13 +220,120 @@ def regime_summary() -> dict:
 
 def test_the_regime_report_says_where_each_estimator_wins(regime_summary):
     text = regime_report(regime_summary)
-    assert "the paper's estimator loses 0.07 um" in text
+    assert (
+        "the paper's estimator minus OLS in the test mean is +0.07 um (median; better in 15%"
+        in text
+    )
     assert "in 1 of 2 cells: interpolated/0.05." in text
-    assert "The largest median gain is 2 um (4.9% of OLS's 41 um there)" in text
+    assert "The lowest median is -2 um (4.9% of OLS's 41 um there)" in text
     regime_summary["cells"]["interpolated/0.005"]["estimators"]["liu_paper_deg"] = {
         "minus_ols_um": {"median": -0.5, "p05": -1, "p95": 0},
         "better_fraction": 0.97,
     }
     text = regime_report(regime_summary)
-    assert "the paper's estimator gains 0.5 um" in text
+    assert (
+        "the paper's estimator minus OLS in the test mean is -0.5 um (median; better in 97%" in text
+    )
     assert "in 2 of 2 cells" in text
+
+
+def test_the_regime_tables_give_the_maximum_and_one_sign(regime_summary):
+    """The test maximum beside the mean (the paper's Liu gain was in the maximum; a mean that
+    wins can come with a maximum that loses), and the heat maps' numbers are the tables'
+    (estimator minus OLS, below 0 better)."""
+    from scenarios.studies.liu_regime.figures import minus_ols_grid
+
+    cell = regime_summary["cells"]["interpolated/0.05"]
+    cell["ols_test_pos_max_um"] = {"median": 97.0}
+    e = cell["estimators"]["liu_paper_deg"]
+    e["minus_ols_max_um"] = {"median": 5.5, "p05": 3.0, "p95": 8.0}
+    e["better_fraction_max"] = 0.1
+    text = regime_report(regime_summary)
+    assert "| interpolated/0.05 | 41 | 97 | -2 (-3..-1), 95% | +5.5 (+3..+8), 10% |" in text
+    assert "| interpolated/0.005 | 36 | n/a | +0.07 (-0.93..+1.07), 15% | n/a |" in text
+    assert "(better in 95% of draws); in the test maximum +5.5 um (better in 10%)." in text
+    assert "One sign everywhere, tables, sentences and heat maps: estimator minus OLS" in text
+    # the paper's Table 5: 35 -> 30 um in the mean, 92 -> 56 um in the maximum
+    assert "(the paper's Liu: -14.3% in the mean, -39.1% in the maximum)" in text
+    regime_summary.update(placements=["interpolated"], sigmas_mm=[0.005, 0.05])
+    diff, better = minus_ols_grid(regime_summary, "liu_paper_deg")
+    assert diff.tolist() == [[0.07, -2.0]] and better.tolist() == [[0.15, 0.95]]
+
+
+def test_the_bias_sentence_follows_the_noise_free_cells(regime_summary):
+    """ "Shrinkage does not remove such a bias" only where the noise-free cells (sigma 0) show
+    no estimator better than OLS; where one is (the paper's Liu gained 3.4 um in the tilted
+    cell at sigma 0), the sentence says the bias moved."""
+    from scenarios.studies.liu_vs_ols.sentences import bias_clause
+
+    def free(diff: float, better: float) -> dict:
+        e = {"minus_ols_um": {"median": diff, "p05": diff - 1, "p95": diff + 1}}
+        return {
+            "n_draws": 20,
+            "ols_test_pos_mean_um": {"median": 30.0},
+            "estimators": {"liu_paper_deg": {**e, "better_fraction": better}},
+        }
+
+    assert "no noise-free cell" in bias_clause({})
+    reg = {"cells": {"tilted/0": free(-3.4, 0.9), "tilted/0.005": free(1.0, 0.2)}}
+    said = bias_clause(reg)
+    assert said.startswith("shrinking the estimate can move such a bias")
+    assert "`liu_paper_deg` minus OLS -3.4 um in tilted (median; better in 90% of draws)" in said
+    reg["cells"]["tilted/0"] = free(0.8, 0.1)
+    said = bias_clause(reg)
+    assert said.startswith("shrinking the estimate does not remove such a bias")
+    assert "(lowest: `liu_paper_deg` minus OLS +0.8 um in tilted" in said
+    s = summary()
+    s["regime"] = {"source": "liu_regime/summary.json", "sigmas_mm": [0.0], **reg}
+    assert "describes; shrinking the estimate does not remove such a bias: noise-free" in report(s)
+    regime_summary["cells"]["tilted/0"] = free(-3.4, 0.9)
+    text = regime_report(regime_summary)
+    assert "Noise-free (sigma 0), where shrinkage has no noise to take off" in text
+    assert "`liu_paper_deg (paper's Liu)` in tilted -3.4 um (90% better): what shrinkage" in text
+    del regime_summary["cells"]["tilted/0"]
+    assert "Noise-free" not in regime_report(regime_summary)
+
+
+def test_a_residual_within_the_noise_after_the_refit_is_no_effect():
+    """The diagnosis reads the one-step fine OLS; when it modelled nothing and the nonlinear
+    refit passes the chi-square noise test (p >= 0.01, the diagnosis's own level), the loop
+    says "none" (the geometry-only control once said "unexplained" at 0.0085 mm against a
+    floor of 0.0087 mm); below the level, or with an effect modelled, the diagnosis's word."""
+    from scenarios.studies.liu_vs_ols.loop import NOISE_ALPHA, chi_square_p, loop_verdict
+
+    assert NOISE_ALPHA == 0.01
+    chosen, why = loop_verdict("unexplained", "it exceeds", False, 0.353, 0.0085, 0.0087)
+    assert chosen == "none"
+    assert "leaves 0.0085 mm against the noise floor 0.0087 mm" in why
+    assert "chi-square p = 0.353 >= 0.01" in why
+    assert loop_verdict("unexplained", "it exceeds", False, 0.009, 0.0095, 0.0087) == (
+        "unexplained",
+        "it exceeds",
+    )
+    assert loop_verdict("backlash", "lowers", True, 0.5, 0.0086, 0.0087) == ("backlash", "lowers")
+    assert loop_verdict("none", "noise", False, 0.5, 0.0086, 0.0087) == ("none", "noise")
+    # chi-square: a sum of squares at its expectation (dof sigma^2) for many dof is p ~ 0.5;
+    # 20 % above it with dof = 1000 is 4.47 standard deviations (sqrt(2 dof) = 44.7): a normal
+    # tail of 4e-6, the chi-square's right tail heavier but below 1e-4
+    assert chi_square_p(1000 * 0.005**2, 0.005, 1000) == pytest.approx(0.494, abs=0.003)
+    assert 4e-6 < chi_square_p(1200 * 0.005**2, 0.005, 1000) < 1e-4
+
+
+def test_the_files_loop_sentence_says_nothing_was_named():
+    """diagnose naming "none" leaves identify --with nothing to add: no "the loop did not
+    close", and the geometric fit's test RMS from the files."""
+    from scenarios.files_loop import files_loop_sentence
+
+    f = {
+        "exit_codes": {"diagnose": 0, "identify": 2, "verify": None},
+        "failed_because": {"identify": "error: it named no effect (none)"},
+        "named_effect": "none",
+        "test_rms_mm": {"geometric_fit": 0.0071, "diagnosis": 0.0071, "with_effect": None},
+        "files": "loop_through_files",
+    }
+    text = files_loop_sentence(f)
+    assert "diagnose named no effect (none), so identify --with has nothing to add" in text
+    assert "says so (exit 2); the geometric fit's test RMS is 0.0071 mm" in text
+    assert "did not close" not in text
+    f["named_effect"], f["exit_codes"]["diagnose"] = None, 2
+    assert "the loop did not close" in files_loop_sentence(f)

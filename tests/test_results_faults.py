@@ -333,3 +333,43 @@ def test_recording_on_a_real_full_disk_exits_instead_of_hanging(tmp_path):
     )
     assert done.returncode == 2, done.stderr
     assert "No space left on device" in done.stderr
+
+
+def test_final_paths_name_the_run_folder_by_its_final_name():
+    """A ``.<name>.partial-XXXXXXXX`` component (mkdtemp's 8 characters) becomes ``<name>``
+    wherever a path starts; anything else is left as it was."""
+    from scenarios.results_folder import final_paths, final_paths_in
+
+    logged = (
+        "$ pkm-calib identify --data /r/.serial_arm.partial-5854nu2p/d/a.csv "
+        "--out=/r/.x.y.partial-ab_d1234/r.json"
+    )
+    assert (
+        final_paths(logged)
+        == "$ pkm-calib identify --data /r/serial_arm/d/a.csv --out=/r/x.y/r.json"
+    )
+    said = "error: '.liu.partial-ue0jnw48/loop/diagnosis.json': bad\n.a.partial-abcdefgh"
+    assert final_paths(said) == "error: 'liu/loop/diagnosis.json': bad\na"
+    for kept in ("/r/.a.partial-abc/x", "/r/b.a.partial-abcdefgh/x", "/r/.a.complete-abcdefgh"):
+        assert final_paths(kept) == kept
+    nested = {"k": ["/r/.a.partial-abcdefgh/f", 1.5, ("/r/.a.partial-abcdefgh",)], "n": None}
+    assert final_paths_in(nested) == {"k": ["/r/a/f", 1.5, ("/r/a",)], "n": None}
+
+
+def test_name_final_paths_rewrites_the_text_files_only(tmp_path):
+    from scenarios.results_folder import name_final_paths
+
+    run = tmp_path / ".arm.partial-abcd1234"
+    (run / "sub").mkdir(parents=True)
+    said = f'{{"data": "{run}/d.csv"}}'
+    (run / "r.json").write_text(said)
+    (run / "sub" / "c.log").write_text(f"$ pkm-calib verify --out {run}/v.json\n")
+    (run / "ok.md").write_text("nothing to change")
+    (run / "x.rrd").write_bytes(said.encode())  # a recording is no text: left as it was
+    changed = name_final_paths(run)
+    assert [p.name for p in changed] == ["r.json", "c.log"]
+    assert (run / "r.json").read_text() == f'{{"data": "{tmp_path}/arm/d.csv"}}'
+    assert (
+        run / "sub" / "c.log"
+    ).read_text() == f"$ pkm-calib verify --out {tmp_path}/arm/v.json\n"
+    assert (run / "x.rrd").read_bytes() == said.encode()

@@ -285,3 +285,15 @@ def test_draw_study_records_the_distribution_of_liu_minus_ols(tmp_path):
         "estimator minus OLS over the draws",
         "report: key numbers",
     }
+
+
+def test_the_geometry_only_control_names_no_effect(tmp_path):
+    """A truth without an effect: the diagnosis of the one-step fine OLS sees its
+    linearisation, the nonlinear refit leaves the noise, and the loop says "none" (the
+    report as well); the refitted residual passes the noise test it is judged by."""
+    s, out = run_scenario("liu_vs_ols_geometry", tmp_path, quiet=True, record=False, figures=False)
+    lp = s["loop"]
+    assert lp["diagnosed_effect"] == "none" and not lp["modelled"], lp["reason"]
+    assert lp["refit_chi2_p_value"] >= 0.01
+    assert lp["residual_rms_after_mm"] < 1.05 * lp["noise_floor_rms_mm"]
+    assert "Diagnosed effect: **none**" in (out / "report.md").read_text()

@@ -6,6 +6,7 @@ scenario's own data.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from to_machine_support import MODELS
@@ -82,3 +83,26 @@ def test_generated_error_models_identify_the_same_held_out_accuracy(arm_run, tmp
     # per cent (a little more noise fitted), and the URDF's model gives the very same fit
     assert from_mjcf == pytest.approx(hand, rel=0.1)
     assert from_urdf == pytest.approx(from_mjcf, rel=1e-6)
+
+
+def test_logs_and_summary_name_the_final_folder(arm_run):
+    """The commands logged during the run name the files where they are after the swap: no
+    path into the run's ``.serial_arm.partial-*`` folder (gone by then), and every file a
+    logged command wrote (--out) is there."""
+    _, out = arm_run
+    logs = sorted(out.glob("*.log"))
+    assert len(logs) >= 8  # identify, verify, compensate, export, ... of both variants
+    outs = []
+    for log in logs:
+        text = log.read_text()
+        assert ".partial-" not in text, log.name
+        words = text.splitlines()[0].split()
+        outs += [words[i + 1] for i, w in enumerate(words[:-1]) if w == "--out"]
+    assert outs and all(Path(p).exists() for p in outs), outs
+    assert all(Path(p).parent == out for p in outs if "datasets" not in p)
+    # and the files the command line wrote (results, verify reports) name their inputs so too
+    for written in [*out.rglob("*.json"), *out.rglob("*.md")]:
+        assert ".partial-" not in written.read_text(), written.name
+    result = json.loads((out / "one_reflector_result.json").read_text())
+    named = [v for v in json.dumps(result).split('"') if v.endswith("one_reflector.csv")]
+    assert named and all(Path(v).is_file() for v in named), named

@@ -27,6 +27,28 @@ def confusion_table(confusion: dict[str, dict[str, int]]) -> list[str]:
     return lines
 
 
+def _count(rate: float | None, n: int) -> int:
+    """The count behind a rate of n cases (the rates are counts over n, stored as floats)."""
+    return 0 if rate is None or n == 0 else round(rate * n)
+
+
+def absorbed_sentence(s: dict[str, Any]) -> str:
+    """The rate with the absorbed cases counted as misses, and with them scored by what was
+    named for them (``correct_rate_with_absorbed``), both from the counts behind the rates."""
+    n_strong, n_absorbed = s["n_correct_rate_cases"], s.get("n_absorbed", 0)
+    if not n_absorbed:
+        return "no case to count as a miss"
+    n_all = n_strong + n_absorbed
+    right = _count(s["correct_rate"], n_strong)
+    right_all = _count(s.get("correct_rate_with_absorbed"), n_all)
+    named_right = right_all - right
+    return (
+        f"counting them as misses the rate would be {right}/{n_all} = {_pct(right / n_all)}; "
+        f"scored by what was named for them ({named_right} of {n_absorbed} named right), "
+        f"{right_all}/{n_all} = {_pct(right_all / n_all)}"
+    )
+
+
 def report(s: dict[str, Any]) -> str:
     goal = s["goal"]
     ok = (
@@ -47,8 +69,7 @@ def report(s: dict[str, Any]) -> str:
         f"* absorbed by the geometry (after the geometric fit the residual passes the "
         f"chi-square test of pure noise, p >= {goal.get('absorbed_p', 0.01):g}; a rule on the "
         f"residual fixed in advance, not on the truth): {s.get('n_absorbed', 0)} strong cases, "
-        f"left out of the rate; counting them as misses the rate would be "
-        f"{_pct(s.get('correct_rate_with_absorbed'))}",
+        "left out of the rate; " + absorbed_sentence(s),
         f"* false alarms on geometry-only truths: **{_pct(s['false_alarm_rate'])}** of "
         f"{s['n_none_cases']} (goal <= {_pct(goal['false_alarm_rate_max'])})",
         f"* audit (held-out) error worse after adding the named effect "

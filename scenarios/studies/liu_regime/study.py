@@ -182,8 +182,9 @@ def _spread(values: np.ndarray) -> dict[str, float]:
 def aggregate_cells(
     results: list[dict[str, Any]], placements: list[str], sigmas: list[float], labels: list[str]
 ) -> dict[str, Any]:
-    """``cells["<placement>/<sigma>"]``: n_draws, OLS's test mean (um), the control, and per
-    estimator minus_ols_um {median, p05, p95} and better_fraction."""
+    """``cells["<placement>/<sigma>"]``: n_draws, OLS's test mean and max (um), the control,
+    and per estimator minus_ols_um {median, p05, p95} and better_fraction of the test mean,
+    minus_ols_max_um and better_fraction_max of the test maximum (estimator minus OLS)."""
     cells: dict[str, Any] = {}
     for placement in placements:
         for sigma in sigmas:
@@ -194,6 +195,7 @@ def aggregate_cells(
             cell: dict[str, Any] = {
                 "n_draws": len(rows),
                 "ols_test_pos_mean_um": _spread(ols),
+                "ols_test_pos_max_um": _spread(ols_max),
                 "order_control_um": float(np.max(np.abs(control))),
                 "estimators": {},
             }
@@ -204,6 +206,7 @@ def aggregate_cells(
                     "minus_ols_um": _spread(diff),
                     "better_fraction": float(np.mean(diff < 0.0)),
                     "minus_ols_max_um": _spread(diff_max),
+                    "better_fraction_max": float(np.mean(diff_max < 0.0)),
                 }
             cells[cell_key(placement, sigma)] = cell
     return cells

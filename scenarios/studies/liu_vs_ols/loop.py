@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import special
 
 from calib.analysis import analyse
 from calib.data import Dataset, write_dataset
@@ -33,6 +34,37 @@ from scenarios.studies.liu_vs_ols.pipeline import Bench, Calibration
 from twin.kinematics import on_one_blas_thread
 from twin.measurement import measure as twin_measure
 
+# the level at which a residual exceeds the noise: the diagnosis's own (diagnose's alpha)
+NOISE_ALPHA = 0.01
+
+
+def loop_verdict(
+    chosen: str,
+    reason: str,
+    modelled: bool,
+    refit_p: float,
+    after_mm: float,
+    floor_mm: float,
+) -> tuple[str, str]:
+    """The loop's label and why. The diagnosis reads the one-step fine OLS, whose residual
+    may exceed the noise by its linearisation alone; when it modelled nothing and the
+    nonlinear refit of the geometry leaves a residual that passes the chi-square noise test
+    (p >= NOISE_ALPHA), there is no effect: "none". Otherwise the diagnosis's label."""
+    if modelled or refit_p < NOISE_ALPHA or chosen == "none":
+        return chosen, reason
+    return "none", (
+        f"the diagnosis said {chosen} of the one-step fine OLS's residual, but the nonlinear "
+        f"refit of the geometry alone leaves {after_mm:.4f} mm against the noise floor "
+        f"{floor_mm:.4f} mm (3D RMS per reading), within the noise (chi-square p = "
+        f"{refit_p:.3g} >= {NOISE_ALPHA:g}): what the one-step estimate left was its "
+        "linearisation, no effect"
+    )
+
+
+def chi_square_p(sum_sq: float, sigma: float, dof: int) -> float:
+    """P(chi-square with ``dof`` degrees of freedom >= sum_sq / sigma^2)."""
+    return float(special.chdtrc(max(dof, 1), sum_sq / sigma**2))
+
 
 @dataclass(frozen=True)
 class Loop:
@@ -41,6 +73,19 @@ class Loop:
     residual_rms_before_mm: float  # 3D per reading, fine (OLS) geometry, nonlinear model
     residual_rms_after_mm: float  # 3D per reading, geometry and effect refitted
     noise_floor_rms_mm: float  # 3D per reading of the tracker noise: sqrt(3) sigma / sqrt(n)
+    refit_chi2_p_value: float  # the refitted residual against the tracker noise
+
+    def verdict(self) -> tuple[str, str]:
+        """The loop's label and why (:func:`loop_verdict`)."""
+        d = self.diagnosis
+        return loop_verdict(
+            d.chosen,
+            d.reason,
+            bool(self.fit.correction.names),
+            self.refit_chi2_p_value,
+            self.residual_rms_after_mm,
+            self.noise_floor_rms_mm,
+        )
 
     def commands(
         self,
@@ -58,9 +103,12 @@ class Loop:
     def summary(self) -> dict[str, Any]:
         d = self.diagnosis
         corr = self.fit.correction
+        chosen, reason = self.verdict()
         return {
-            "diagnosed_effect": d.chosen,
-            "reason": d.reason,
+            "diagnosed_effect": chosen,
+            "reason": reason,
+            "diagnosis_said": d.chosen,  # of the one-step fine OLS's residual
+            "refit_chi2_p_value": self.refit_chi2_p_value,
             "residual_rms_before_mm": self.residual_rms_before_mm,
             "residual_rms_after_mm": self.residual_rms_after_mm,
             "noise_floor_rms_mm": self.noise_floor_rms_mm,
@@ -133,8 +181,12 @@ def close_loop(bench: Bench, cal: Calibration, estimator: str = "ols") -> Loop:
         cal.fine_measured,
     )
     before = residual_rms_3d(cal.fine_measured, model.predict(values, cal.fine_commands).targets)
-    floor = np.sqrt(3.0) * bench.sigma_m / np.sqrt(bench.tracker.repeats)
-    return Loop(diag, fit, before * 1e3, fit.residual_rms_3d_m * 1e3, float(floor) * 1e3)
+    sigma = bench.sigma_m / np.sqrt(bench.tracker.repeats)  # per coordinate of a reading
+    floor = np.sqrt(3.0) * sigma
+    n_readings = cal.fine_measured.size // 3
+    dof = 3 * n_readings - len(fit.columns) - len(correction.theta)
+    refit_p = chi_square_p(fit.residual_rms_3d_m**2 * n_readings, sigma, dof)
+    return Loop(diag, fit, before * 1e3, fit.residual_rms_3d_m * 1e3, float(floor) * 1e3, refit_p)
 
 
 def readings_dataset(

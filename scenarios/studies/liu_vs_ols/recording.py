@@ -57,7 +57,7 @@ def record(
             recorder.log_error_map(stage, group, p[:, :3], errs.position * 1e3, vmax)
     for label, (est, _) in estimates.items():
         recorder.log_parameters(label, kept_names, est.x * shown, est.std_errors * shown)
-    recorder.log_figure("loop", loop_png(loop), f"loop: {loop.diagnosis.chosen}")
+    recorder.log_figure("loop", loop_png(loop), f"loop: {loop.verdict()[0]}")
     recorder.log_figure("coarse_rounds", coarse_png(coarse_changes), "coarse rounds")
 
 
@@ -70,7 +70,8 @@ def loop_png(loop: Any) -> bytes:
     if diag.plot is None:  # nothing named: say so in a figure of its own
         fig, ax = plt.subplots(figsize=(7, 2))
         ax.axis("off")
-        ax.text(0.5, 0.5, f"loop: {diag.chosen}\n{diag.reason}", ha="center", va="center")
+        chosen, reason = loop.verdict()
+        ax.text(0.5, 0.5, f"loop: {chosen}\n{reason}", ha="center", va="center", wrap=True)
         return png_bytes(fig)
     with tempfile.TemporaryDirectory() as tmp:
         path = save_diagnosis_png(diag, Path(tmp) / "loop.png")

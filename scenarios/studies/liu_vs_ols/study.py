@@ -138,7 +138,7 @@ def run(
     t_loop = time.perf_counter()
     loop = close_loop(bench, cal, scenario.get("loop.estimator", str, "ols"))
     progress.note(
-        f"{loop.diagnosis.chosen}: residual {loop.residual_rms_before_mm:.4g} -> "
+        f"{loop.verdict()[0]}: residual {loop.residual_rms_before_mm:.4g} -> "
         f"{loop.residual_rms_after_mm:.4g} mm (3D RMS per reading; noise floor "
         f"{loop.noise_floor_rms_mm:.4g} mm), {time.perf_counter() - t_loop:.1f} s"
     )

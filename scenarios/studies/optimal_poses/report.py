@@ -21,6 +21,31 @@ def failed_sentence(s: dict[str, Any]) -> str:
 SETS = ("optimal", "exchange", "random_same_count", "random_256")
 
 
+def exchange_sentence(s: dict[str, Any]) -> str:
+    """What the exchange design is, at the count it has (the greedy set's, not the paper's)."""
+    n_ex, n_opt, n_paper = s["exchange"]["n_poses"], s["n_optimal"], s["paper_table4"]["n_optimal"]
+    count = (
+        f"at the greedy selection's count, {n_ex} poses"
+        if n_ex == n_opt
+        else f"at {n_ex} poses (the greedy selection stops at {n_opt})"
+    )
+    paper = (
+        f"the paper's optimal set has the same {n_paper}"
+        if n_ex == n_paper
+        else f"the paper's optimal set has {n_paper}"
+    )
+    return (
+        "`exchange` is our design: a DETMAX exchange maximising D-optimality over the boundary "
+        f"poses and random reachable ones, started from the greedy set, {count}; {paper}."
+    )
+
+
+def index_figure_title(index: str, n_starts: int, n_drawn: int) -> str:
+    """The index figure's title: the best of the starts, and how many of them are drawn."""
+    drawn = f"all {n_starts} starts" if n_drawn >= n_starts else f"{n_drawn} of {n_starts} starts"
+    return f"hexapod: {index} index of the greedy selection (the best of {n_starts}; {drawn} drawn)"
+
+
 def report(s: dict[str, Any]) -> str:
     p = s["paper_table4"]
     lines = [
@@ -49,18 +74,17 @@ def report(s: dict[str, Any]) -> str:
     lines += [
         f"| paper: random | 256 | | | {p['random_256']['pos_peak_mm']} | "
         f"{p['random_256']['ori_peak_deg']} |",
-        f"| paper: optimal | 29 | | | {p['optimal_29']['pos_peak_mm']} | "
+        f"| paper: optimal | {p['n_optimal']} | | | {p['optimal_29']['pos_peak_mm']} | "
         f"{p['optimal_29']['ori_peak_deg']} |",
         "",
         "cond.: condition number of the column-scaled identification Jacobian. "
         + failed_sentence(s),
         "",
         "Verification error: the identified model's residual pose error at the 216 grid poses",
-        "to first order, B (truth - estimate); the paper's Table 4 scores its 29 calibration",
-        "poses instead.",
+        "to first order, B (truth - estimate); the paper's Table 4 scores its "
+        f"{p['n_optimal']} calibration poses instead.",
         "",
-        "`exchange` is our design: a DETMAX exchange maximising D-optimality over the boundary",
-        "poses and random reachable ones, at the same count as the paper's optimal set.",
+        exchange_sentence(s),
         "",
         "![index against pose count](index_vs_count.png)",
         "",

@@ -31,12 +31,15 @@ from scenarios.figures import index_vs_count_png
 from scenarios.machine_setup import load_machine
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
+from scenarios.studies.optimal_poses.report import index_figure_title
 from scenarios.sweep.draws import map_draws
 from twin.formats import load_parameter_set
 from twin.kinematics import forward_batch, tool_twist_jacobian_batch
 from twin.mechanism import Mechanism
 from twin.tracker import PoseNoise
 from twin.workspace import boundary_poses, grid_poses, random_poses
+
+N_DRAWN_STARTS = 5  # the index figure draws the best start and the first few of the others
 
 PAPER_TABLE4 = {
     "before": {"pos_peak_mm": 0.1496, "ori_peak_deg": 0.0247},
@@ -193,11 +196,11 @@ def run(
     counts = list(range(best.start_count, best.start_count + len(best.index_by_count)))
     index_vs_count_png(
         out_dir / "index_vs_count.png",
-        f"hexapod: {index} index of the greedy selection (best and all {n_starts} starts)",
+        index_figure_title(index, len(runs), len(runs[:N_DRAWN_STARTS])),
         counts,
         {
             "best start": best.index_by_count,
-            **{f"start {k}": r.index_by_count for k, r in enumerate(runs[:5])},
+            **{f"start {k}": r.index_by_count for k, r in enumerate(runs[:N_DRAWN_STARTS])},
         },
         f"{index} (column-scaled, log)",
         stop=n_opt,

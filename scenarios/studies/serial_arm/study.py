@@ -31,6 +31,7 @@ from calib.fit import Registration
 from scenarios.config import Scenario, ScenarioError
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
+from scenarios.results_folder import final_paths
 from scenarios.studies.serial_arm.loop import close_the_loop
 from scenarios.truth_draw import TruthSpec, draw_truth
 from scenarios.twin_datasets import tracker_frame_dataset
@@ -61,7 +62,8 @@ def _cli(args: list[str], log: Path) -> int:
     out = io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
         code = calib_main(args)
-    log.write_text(f"$ pkm-calib {' '.join(args)}\n{out.getvalue()}exit {code}\n")
+    # the paths as they are after the run's folder is swapped in (scenarios.results_folder)
+    log.write_text(final_paths(f"$ pkm-calib {' '.join(args)}\n{out.getvalue()}exit {code}\n"))
     return code
 
 
