@@ -151,6 +151,13 @@ def _num(x: float) -> str:
     return repr(x) if x else "0"
 
 
+def _limit(x: float) -> str:
+    """A joint limit or home to 1e-9 (deg or mm): the MJCF stores a range in radians with the
+    digits it was written with, and +-360 deg came back as 360.0000000000237; a limit is no
+    kinematics, and the geometry keeps every digit."""
+    return _num(round(float(x), 9))
+
+
 def format_dh_table(table: DHTable, comments: tuple[str, ...] = ()) -> str:
     """The CSV text of ``table`` in ``twin.formats.dh_table``'s format (mm, deg; every digit)."""
     deg, mm = math.degrees, (lambda v: v * 1e3)
@@ -162,9 +169,10 @@ def format_dh_table(table: DHTable, comments: tuple[str, ...] = ()) -> str:
     for j in table.joints:
         geometry = [_num(deg(j.alpha)), _num(mm(j.a)), _num(mm(j.d)), _num(deg(j.theta))]
         if j.type == "R":
-            limits = [_num(deg(j.lower)), _num(deg(j.upper)), "R", _num(deg(j.home)), "", "", ""]
+            limits = [_limit(deg(j.lower)), _limit(deg(j.upper)), "R", _limit(deg(j.home))]
+            limits += ["", "", ""]
         else:
-            limits = ["", "", "P", "", _num(mm(j.lower)), _num(mm(j.upper)), _num(mm(j.home))]
+            limits = ["", "", "P", "", _limit(mm(j.lower)), _limit(mm(j.upper)), _limit(mm(j.home))]
         lines.append(",".join([j.name, *geometry, *limits]))
     lines.append("site,x_mm,y_mm,z_mm,rx_deg,ry_deg,rz_deg")
     for s in (table.base, table.tool):
