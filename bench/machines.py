@@ -24,7 +24,7 @@ from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
 from twin.tracker import PoseNoise, Tracker, TrackerNoise
-from twin.workspace import commands_for_poses, layer_poses, random_poses
+from twin.workspace import commands_for_poses, layer_poses, random_poses, uniform_commands
 
 
 @dataclass(frozen=True)
@@ -84,9 +84,7 @@ def arm() -> BenchMachine:
     rng = np.random.default_rng(11)
     spec = TruthSpec("uniform", 0.3, 0.03, 0.0, 0.05)
     truth = nominal.with_model(params.inject(nominal.model, draw_truth(params, spec, rng)))
-    lo, hi = nominal.actuator_range.T
-    mid, half = (lo + hi) / 2, 0.8 * (hi - lo) / 2
-    cmds = rng.uniform(mid - half, mid + half, (256, nominal.n_actuators))
+    cmds = uniform_commands(nominal, 256, 0.8, rng)
     return BenchMachine(
         "arm",
         nominal,

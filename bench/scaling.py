@@ -28,7 +28,7 @@ from scenarios.twin_datasets import measured_dataset
 from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import random_poses
+from twin.workspace import random_poses, uniform_commands
 
 READINGS = (1_000, 10_000, 100_000)
 MACHINES = {  # name: (MJCF, error model)
@@ -39,9 +39,7 @@ MACHINES = {  # name: (MJCF, error model)
 
 def _commands(nominal: Mechanism, n: int, rng: np.random.Generator) -> np.ndarray:
     if nominal.is_serial:  # a serial arm: joint commands over 80 % of each range
-        lo, hi = nominal.actuator_range.T
-        mid, half = (lo + hi) / 2, 0.8 * (hi - lo) / 2
-        return rng.uniform(mid - half, mid + half, (n, nominal.n_actuators))
+        return uniform_commands(nominal, n, 0.8, rng)
     return random_poses(nominal, n, rng)[1]
 
 

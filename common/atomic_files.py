@@ -100,6 +100,17 @@ def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
     return write_text_atomic(path, json_text(data))
 
 
+def write_figure_png(fig: Any, path: str | os.PathLike[str], dpi: int = 110) -> Path:
+    """A matplotlib figure as a PNG at ``path``, written whole or not at all; the figure is
+    closed either way."""
+    import matplotlib.pyplot as plt  # on first use: nothing else here plots
+
+    try:
+        return write_with_atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=dpi))
+    finally:
+        plt.close(fig)
+
+
 def write_with_atomic(
     path: str | os.PathLike[str], writer: Callable[[Path], None], suffix: str = ".tmp"
 ) -> Path:

@@ -35,7 +35,7 @@ from twin.formats.parameter_file import load_parameter_set
 from twin.kinematics.single_pose import inverse
 from twin.mechanism import Mechanism
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import random_poses, workspace_box
+from twin.workspace import random_poses, uniform_commands, workspace_box
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
@@ -75,9 +75,7 @@ def _write(
 
 
 def _arm_joints(mech: Mechanism, n: int, rng: np.random.Generator) -> np.ndarray:
-    lo, hi = mech.actuator_range.T
-    mid, half = (lo + hi) / 2, 0.8 * (hi - lo) / 2
-    return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
+    return uniform_commands(mech, n, 0.8, rng)
 
 
 def arm_case(

@@ -154,6 +154,16 @@ def checked_commands(
     return commands
 
 
+def uniform_commands(
+    mech: Mechanism, n: int, fraction: float, rng: np.random.Generator
+) -> np.ndarray:
+    """``n`` commands (N, A) drawn uniformly over ``fraction`` of each actuator's range about
+    its middle (an arm's joints; no closure or workspace check)."""
+    lo, hi = mech.actuator_range.T
+    mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
+    return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
+
+
 def random_poses(
     mech: Mechanism, n: int, rng: np.random.Generator, max_draws: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:

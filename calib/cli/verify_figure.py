@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from calib.fit import Verification
-from common.atomic_files import write_with_atomic
+from common.atomic_files import write_figure_png
 
 LABELLED_POSES = 40  # up to this many poses, each pose_id on the axis
 WORST = 5  # beyond, the poses named beside their markers: the largest errors after
@@ -70,10 +70,4 @@ def verification_figure(v: Verification):
 
 def save_verification_png(v: Verification, path: str | Path) -> Path:
     """:func:`verification_figure` written atomically."""
-    import matplotlib.pyplot as plt
-
-    fig = verification_figure(v)
-    try:
-        return write_with_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    finally:
-        plt.close(fig)
+    return write_figure_png(verification_figure(v), path)

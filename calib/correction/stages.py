@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from common.atomic_files import write_with_atomic
+from common.atomic_files import write_figure_png
 
 STAGES = ("nominal", "geometry", "effect", "correction")
 
@@ -78,9 +78,4 @@ def save_stages_png(rows: list[dict], path: str | Path, title: str) -> Path:
     ax.set_xlabel("stage (share: of the nominal mean square, removed by the stage)")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    try:
-        write_with_atomic(path, lambda f: fig.savefig(f, format="png", dpi=110))
-    finally:
-        plt.close(fig)
-    return path
+    return write_figure_png(fig, path)

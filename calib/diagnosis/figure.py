@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.atomic_files import write_with_atomic
+from common.atomic_files import write_figure_png
 
 
 def save_diagnosis_png(diag, path: str | Path) -> Path:
@@ -50,9 +50,4 @@ def save_diagnosis_png(diag, path: str | Path) -> Path:
         ax.set_title(f"diagnosis: {diag.chosen}", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    path = Path(path)
-    try:
-        write_with_atomic(path, lambda f: fig.savefig(f, format="png", dpi=110))
-    finally:
-        plt.close(fig)
-    return path
+    return write_figure_png(fig, path)

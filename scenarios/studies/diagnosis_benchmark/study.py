@@ -71,7 +71,7 @@ from twin.kinematics import forward_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import random_poses
+from twin.workspace import random_poses, uniform_commands
 
 
 def _draw_commands(mech: Mechanism, n: int, fraction: float, rng: np.random.Generator):
@@ -80,9 +80,7 @@ def _draw_commands(mech: Mechanism, n: int, fraction: float, rng: np.random.Gene
     its middle (a serial arm)."""
     if mech.workspace_min is not None and mech.workspace_max is not None:
         return random_poses(mech, n, rng)[1]
-    lo, hi = mech.actuator_range.T
-    mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
-    return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
+    return uniform_commands(mech, n, fraction, rng)
 
 
 def _rms_coord(a: np.ndarray, b: np.ndarray) -> float:

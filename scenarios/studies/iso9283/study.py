@@ -19,8 +19,6 @@ The numbers come from the files those commands write.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import time
 from pathlib import Path
@@ -28,20 +26,19 @@ from typing import Any
 
 import numpy as np
 
-from calib.cli import main as calib_main
 from calib.data import Dataset, write_dataset
 from scenarios.config import Scenario, ScenarioError
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
-from scenarios.results_folder import final_paths
+from scenarios.studies.serial_arm.study import _cli, _tracker
 from scenarios.truth_draw import TruthSpec, draw_truth
 from twin.formats import load_parameter_set
 from twin.kinematics import forward_batch, inverse
 from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.rotations import rpy_from_matrix
-from twin.tracker import PoseNoise, Tracker, TrackerNoise
-from twin.workspace import random_poses
+from twin.tracker import PoseNoise
+from twin.workspace import random_poses, uniform_commands
 
 PLANE_CORNERS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, 1], [-1, 1, 1]], dtype=float)
 
@@ -55,21 +52,10 @@ def iso_cube_poses(centre: np.ndarray, rpy: np.ndarray, edge_m: float) -> np.nda
     return np.hstack([points, np.tile(rpy, (5, 1))])
 
 
-def _cli(args: list[str], log: Path) -> int:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
-        code = calib_main(args)
-    # the paths as they are after the run's folder is swapped in (scenarios.results_folder)
-    log.write_text(final_paths(f"$ pkm-calib {' '.join(args)}\n{out.getvalue()}exit {code}\n"))
-    return code
-
-
 def _calibration_commands(mech: Mechanism, n: int, fraction: float, rng) -> np.ndarray:
     if mech.workspace_min is not None:  # a parallel machine: poses in its declared box
         return random_poses(mech, n, rng)[1]
-    lo, hi = mech.actuator_range.T
-    mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
-    return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
+    return uniform_commands(mech, n, fraction, rng)
 
 
 def _iso_commands(
@@ -111,11 +97,7 @@ def _machine(
     edge_m, at = scenario.get(edge_key, float) * 1e-3, scenario.get(at_key, float)
     iso, poses = _iso_commands(nominal, edge_m, at, name)
     commands = np.vstack([cal, np.tile(iso, (cycles, 1))])  # cycles P1..P5, P1..P5, ...
-    tracker = Tracker(
-        position_m=tuple(v * 1e-3 for v in scenario.get("tracker.position_mm", list)),
-        noise=TrackerNoise.from_spec(scenario.get("tracker.noise", str)),
-        rotation_rpy_rad=tuple(np.radians(scenario.get("tracker.rotation_deg", list))),
-    )
+    tracker = _tracker(scenario)
     repeat = PoseNoise(
         "gaussian",
         scenario.get("repeatability.position_mm", float) * 1e-3,

@@ -29,6 +29,7 @@ from twin.kinematics import forward_batch
 from twin.measurement import measure
 from twin.mechanism import Mechanism
 from twin.tracker import Tracker, TrackerNoise
+from twin.workspace import uniform_commands
 
 Cli = Callable[[list[str], Path], int]
 
@@ -69,9 +70,7 @@ def compensate_program(
 ) -> dict[str, Any]:
     """compensate --commands of an ``n``-target program, re-measured on the truth twin."""
     nominal = Mechanism.from_xml(model_path)
-    lo, hi = nominal.actuator_range.T
-    mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
-    program = rng.uniform(mid - half, mid + half, (n, nominal.n_actuators))
+    program = uniform_commands(nominal, n, fraction, rng)
     program_csv, corrected_csv = out_dir / f"{name}_program.csv", out_dir / f"{name}_corrected.csv"
     _write_program(program_csv, nominal, program)
     files = ["--model", str(model_path), "--errors", str(errors_path)]

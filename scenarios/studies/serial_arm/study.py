@@ -40,6 +40,7 @@ from twin.kinematics import forward_batch
 from twin.mechanism import Mechanism
 from twin.parameters import ParameterSet
 from twin.tracker import Tracker, TrackerNoise
+from twin.workspace import uniform_commands
 
 
 def _tracker(scenario: Scenario) -> Tracker:
@@ -48,13 +49,6 @@ def _tracker(scenario: Scenario) -> Tracker:
         noise=TrackerNoise.from_spec(scenario.get("tracker.noise", str)),
         rotation_rpy_rad=tuple(np.radians(scenario.get("tracker.rotation_deg", list))),
     )
-
-
-def _joints(mech: Mechanism, n: int, fraction: float, rng: np.random.Generator) -> np.ndarray:
-    """Joint commands drawn uniformly over ``fraction`` of each range about its middle."""
-    lo, hi = mech.actuator_range.T
-    mid, half = (lo + hi) / 2, fraction * (hi - lo) / 2
-    return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
 
 
 def _cli(args: list[str], log: Path) -> int:
@@ -108,7 +102,9 @@ def drawn_arm(
     truth = nominal.with_model(params.inject(nominal.model, truth_values))
     n_cal = scenario.get("plan.calibration_poses", int)
     n_test = scenario.get("plan.test_poses", int)
-    commands = _joints(nominal, n_cal + n_test, scenario.get("plan.joint_fraction", float), rng)
+    commands = uniform_commands(
+        nominal, n_cal + n_test, scenario.get("plan.joint_fraction", float), rng
+    )
     sigma_mm = scenario.get("tracker.sigma_mm", float)
     return DrawnArm(
         Path(model_path),
