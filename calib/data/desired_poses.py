@@ -75,18 +75,21 @@ def _header(path: Path, line: int, cells: list[str]) -> dict[str, int]:
     return columns
 
 
-def _number(path: Path, line: int, column: str, text: str) -> float:
+def cell_number(
+    path: Path, line: int, column: str, text: str, error: type[Exception] = ValueError
+) -> float:
+    """A CSV cell's finite number; ``error`` (the reader's own) names file, line and column."""
     try:
         value = float(text)
     except ValueError:
-        raise DesiredPosesError(
-            f"{path}, line {line}, column '{column}': '{text}' is not a number"
-        ) from None
+        raise error(f"{path}, line {line}, column '{column}': '{text}' is not a number") from None
     if not math.isfinite(value):
-        raise DesiredPosesError(
-            f"{path}, line {line}, column '{column}': '{text}' is not a finite number"
-        )
+        raise error(f"{path}, line {line}, column '{column}': '{text}' is not a finite number")
     return value
+
+
+def _number(path: Path, line: int, column: str, text: str) -> float:
+    return cell_number(path, line, column, text, DesiredPosesError)
 
 
 def read_desired_poses(path: str | os.PathLike[str]) -> DesiredPoses:

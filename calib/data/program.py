@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calib.data.desired_poses import cell_number
 from calib.exceptions import CalibError
 from twin.formats.parameter_file import closest, read_utf8
 
@@ -84,15 +85,7 @@ def _columns(path: Path, line: int, cells: list[str], actuators: Sequence[str]) 
 
 
 def _number(path: Path, line: int, column: str, text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise ProgramError(
-            f"{path}, line {line}, column '{column}': '{text}' is not a number"
-        ) from None
-    if not math.isfinite(value):
-        raise ProgramError(f"{path}, line {line}, column '{column}': '{text}' is not finite")
-    return value
+    return cell_number(path, line, column, text, ProgramError)
 
 
 def read_program(
