@@ -13,6 +13,17 @@ from twin.mechanism import Mechanism
 from twin.tracker import PoseNoise, Tracker
 
 
+def machine_fields(mech: Mechanism) -> dict:
+    """What a Dataset says of its machine: the model's name, its actuators and their units,
+    its targets."""
+    return {
+        "model": mech.name,
+        "actuator_names": mech.actuator_names,
+        "actuator_units": tuple("mm" if s else "deg" for s in mech.actuator_is_slide),
+        "target_names": mech.target_names,
+    }
+
+
 def measured_dataset(
     truth: Mechanism,
     commands: np.ndarray,
@@ -39,11 +50,8 @@ def measured_dataset(
             "rotation_deg": float(np.degrees(pose_noise.rotation_rad)),
         }
     return Dataset(
-        model=truth.name,
+        **machine_fields(truth),
         frame="base",
-        actuator_names=truth.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
-        target_names=truth.target_names,
         pose_ids=np.arange(first_pose_id, first_pose_id + n),
         sets=np.array([set_name] * n),
         commands=commands,
@@ -71,11 +79,8 @@ def tracker_frame_dataset(
     n = len(commands)
     m = measure(truth, commands, tracker, rng, effects=effects)
     return Dataset(
-        model=truth.name,
+        **machine_fields(truth),
         frame="tracker",
-        actuator_names=truth.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in truth.actuator_is_slide),
-        target_names=truth.target_names,
         pose_ids=np.arange(1, n + 1),
         sets=np.array(["calibration"] * n_cal + ["test"] * (n - n_cal)),
         commands=commands,

@@ -32,6 +32,7 @@ from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
 from scenarios.studies.serial_arm.study import _cli, _tracker
 from scenarios.truth_draw import TruthSpec, draw_truth
+from scenarios.twin_datasets import machine_fields
 from twin.formats import load_parameter_set
 from twin.kinematics import forward_batch, inverse
 from twin.measurement import measure
@@ -107,11 +108,8 @@ def _machine(
     n = len(commands)
     sigma_mm = scenario.get("tracker.sigma_mm", float)
     ds = Dataset(
-        model=nominal.name,
+        **machine_fields(nominal),
         frame="tracker",
-        actuator_names=nominal.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in nominal.actuator_is_slide),
-        target_names=nominal.target_names,
         pose_ids=np.arange(1, n + 1),
         sets=np.array(["calibration"] * n_cal + ["iso"] * (n - n_cal)),
         commands=commands,

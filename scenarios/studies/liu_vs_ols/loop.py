@@ -31,6 +31,7 @@ from calib.loop import (
 )
 from scenarios.files_loop import loop_through_files
 from scenarios.studies.liu_vs_ols.pipeline import Bench, Calibration
+from scenarios.twin_datasets import machine_fields
 from twin.kinematics import on_one_blas_thread
 from twin.measurement import measure as twin_measure
 
@@ -208,11 +209,8 @@ def readings_dataset(
     )
     readings = np.concatenate([cal.fine_measured[:, :, None, :], m.readings[n_fine:]])
     return Dataset(
-        model=nominal.name,
+        **machine_fields(nominal),
         frame="base",
-        actuator_names=nominal.actuator_names,
-        actuator_units=tuple("mm" if s else "deg" for s in nominal.actuator_is_slide),
-        target_names=nominal.target_names,
         pose_ids=np.arange(n_fine + n_test),
         sets=np.array(["calibration"] * n_fine + ["test"] * n_test),
         commands=commands,
