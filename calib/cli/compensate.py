@@ -308,13 +308,12 @@ def seeds_for(args: argparse.Namespace, machine: IdentifiedMachine, desired: Des
 def honest_before(
     machine: IdentifiedMachine,
     comp: Compensation,
-    model: Any,
+    reg0: Registration | None,
     nominal_commands: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Compensation, str]:
-    """``comp`` with the nominal commands' error measured in the one frame every command
-    shares (calib.compensate.before), and that frame in words. ``nominal_commands``: (the
-    commands, their nominal configurations) when they are not ``comp``'s own."""
-    reg0 = nominal_registration(model, machine.result)
+    """``comp`` with the nominal commands' error in the frame every command shares (``reg0``:
+    calib.fit.nominal_registration; calib.compensate.before), and that frame in words.
+    ``nominal_commands``: (commands, nominal configurations) when not ``comp``'s own."""
     cmds, qpos = nominal_commands or (comp.nominal_commands, comp.nominal_qpos)
     error, reflectors = nominal_commands_error(machine, cmds, qpos, reg0)
     if machine.registration is None:
@@ -395,7 +394,7 @@ def run(args: argparse.Namespace) -> int:
             aimed = poses_in_base(desired, frame, machine, seeds.rotations, reg0)
             solved = solve_each(mech, aimed, seeds.starts)
             before_commands = (solved.commands, solved.qpos)
-        comp, where = honest_before(machine, comp, model, before_commands)
+        comp, where = honest_before(machine, comp, reg0, before_commands)
         labels = seeds.labels
         inputs.update(
             poses=str(args.poses),
@@ -412,7 +411,7 @@ def run(args: argparse.Namespace) -> int:
         assert program is not None
         reg0 = nominal_registration(model, machine.result)
         comp = compensate_program(machine, program.commands, program.pose_ids, reg0)
-        comp, where = honest_before(machine, comp, model)
+        comp, where = honest_before(machine, comp, reg0)
         changes = program_changes(machine, comp)
         inputs.update(
             commands=str(args.commands),
