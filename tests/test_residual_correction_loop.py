@@ -86,8 +86,10 @@ def test_compensate_and_export_carry_the_correction(loop, capsys):
     # every target the compensation without the correction reaches is written with it too
     n_applied = len(corr["applied"]) + len(corr["not_reached_with_correction"])
     assert n_applied + len(corr["outside_calibrated_region"]) == side["n_written"]
-    top = float(re.search(r"with the correction: max ([0-9.e+-]+) mm", said).group(1))
-    assert top < 1e-6  # the fixed point solved: model + correction at the written commands
+    # the fixed point solved: model + correction at the written commands, below 1e-6 mm
+    # (a round-off residual is said as that bound, its digits being the CPU's)
+    found = re.search(r"with the correction: max (below )?([0-9.e+-]+) mm", said)
+    assert float(found.group(2)) <= 1e-6 if found.group(1) else float(found.group(2)) < 1e-6
     m = out / "m.xml"
     assert main(["export", *files, "--result", r, "--out", str(m)]) == 0
     sidecar = json.loads((out / "m.xml.calibration.json").read_text())

@@ -63,6 +63,7 @@ from calib.compensate import (
     nominal_commands_error,
     nominal_targets,
     run_state,
+    shown_residual,
     solve_each,
     with_residual_correction,
 )
@@ -335,8 +336,8 @@ def _residual_line(comp: Compensation, own: str, where: str = "") -> str | None:
     r, t = comp.residual_m[ok] * 1e3, np.degrees(comp.residual_rad[ok])
     e = comp.nominal_error_m[ok] * 1e3
     e = e[np.isfinite(e)]
-    line = (
-        f"predicted residual at the written commands: max {np.max(r):.3g} mm, {np.max(t):.3g} deg"
+    line = "predicted residual at the written commands: max " + ", ".join(
+        (shown_residual(float(np.max(r)), "mm"), shown_residual(float(np.max(t)), "deg"))
     )
     if e.size:
         line += (

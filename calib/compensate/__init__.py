@@ -28,6 +28,7 @@ __all__, __getattr__, __dir__ = face(
         "poses": (
             "Compensation",
             "compensate",
+            "shown_residual",
             "solve_each",
         ),
         "residual": ("with_residual_correction",),

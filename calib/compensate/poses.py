@@ -34,6 +34,16 @@ UNREACHABLE = (
 )
 
 
+# a residual the solves leave below this (mm or deg) is their round-off, whose digits differ
+# from CPU to CPU: said as a bound, not as digits
+ROUND_OFF = 1e-6
+
+
+def shown_residual(value: float, unit: str) -> str:
+    """A predicted residual in words: its value, or below ROUND_OFF where it is round-off."""
+    return f"below {ROUND_OFF:g} {unit}" if value < ROUND_OFF else f"{value:.3g} {unit}"
+
+
 def _file_units(mech: Mechanism, k: int, value: float) -> tuple[float, str]:
     return (value * 1e3, "mm") if mech.actuator_is_slide[k] else (float(np.degrees(value)), "deg")
 

@@ -16,7 +16,13 @@ from dataclasses import replace
 import numpy as np
 
 from calib.compensate.identified_machine import IdentifiedMachine
-from calib.compensate.poses import Compensation, SolvedPoses, _tool_at, compensate_frames
+from calib.compensate.poses import (
+    Compensation,
+    SolvedPoses,
+    _tool_at,
+    compensate_frames,
+    shown_residual,
+)
 from calib.correction import corrected_targets, correction_in
 
 ROUNDS = 4
@@ -84,7 +90,7 @@ def with_residual_correction(
             else None
         ),
         "predicted residual at the written commands with the correction: max "
-        f"{np.nanmax(residual, initial=0.0) * 1e3:.3g} mm at the tool point",
+        f"{shown_residual(float(np.nanmax(residual, initial=0.0)) * 1e3, 'mm')} at the tool point",
     ]
     entry = {
         "applied": [str(p) for p, i in zip(comp.pose_ids, inside, strict=True) if i],
