@@ -116,16 +116,17 @@ def choose_fixed(
     with_reg: dict[int, bool] = {}
     # the null direction that moves each fixed member alone (one solve for all of them)
     directions = v0 @ np.linalg.lstsq(v0[fixed_arr], np.eye(len(fixed_arr)), rcond=None)[0]
+    held = {int(j) for j in fixed_arr}
     for k, j in enumerate(fixed_arr):
         if zero[j]:
             partners[int(j)], with_reg[int(j)] = (), False
             continue
         direction = directions[:, k]
         size = np.abs(direction)
+        # the candidates above the threshold first (a set, not the array, for membership)
+        big = np.flatnonzero(size > MEMBER_RTOL * size.max())
         others = [
-            int(i)
-            for i in np.argsort(-size, kind="stable")
-            if i != j and i not in fixed_arr and size[i] > MEMBER_RTOL * size.max()
+            int(i) for i in big[np.argsort(-size[big], kind="stable")] if int(i) not in held
         ]
         partners[int(j)] = tuple(others)
         moved = 0.0

@@ -46,21 +46,25 @@ def screw_arrays(
     body = np.full(n, -1, dtype=np.int64)
     vec = np.zeros((n, 3))
     pivot = np.zeros((n, 3))
-    for k in np.flatnonzero(kind == 0):
-        code[k], body[k], vec[k] = SHIFT, model.body_parentid[el[k]], axis[k]
+    shifted = np.flatnonzero(kind == 0)
+    code[shifted], body[shifted] = SHIFT, model.body_parentid[el[shifted]]
+    vec[shifted] = axis[shifted]
     turned = np.flatnonzero(kind == 1)
     if turned.size:
         rotvecs = params.rotation_vectors(np.asarray(values, dtype=float))
+        # one left Jacobian per rotated body (a body's rotations share its rotation vector)
+        left = {b: left_jacobian_so3(w) for b, w in rotvecs.items()}
+        code[turned], body[turned] = TURN, model.body_parentid[el[turned]]
         for k in turned:
-            code[k], body[k] = TURN, model.body_parentid[el[k]]
-            vec[k] = left_jacobian_so3(rotvecs[int(el[k])]) @ axis[k]
-            pivot[k] = model.body_pos[el[k]]
-    for k in np.flatnonzero(kind == 2):
-        code[k], body[k], vec[k] = SHIFT, model.site_bodyid[el[k]], axis[k]
-    for k in np.flatnonzero(kind == 3):
-        code[k] = HINGE if params.is_angle[k] else SLIDE
-    for k in np.flatnonzero(~params.is_geometric):  # no motion (callers refuse them before)
-        code[k], body[k] = SHIFT, 0
+            vec[k] = left[int(el[k])] @ axis[k]
+        pivot[turned] = model.body_pos[el[turned]]
+    sited = np.flatnonzero(kind == 2)
+    code[sited], body[sited] = SHIFT, model.site_bodyid[el[sited]]
+    vec[sited] = axis[sited]
+    zeros = np.flatnonzero(kind == 3)
+    code[zeros] = np.where(np.asarray(params.is_angle)[zeros], HINGE, SLIDE)
+    other = np.flatnonzero(~params.is_geometric)  # no motion (callers refuse them before)
+    code[other], body[other] = SHIFT, 0
     return code, int_array(el), body, vec, pivot
 
 
