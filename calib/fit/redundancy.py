@@ -54,8 +54,41 @@ def null_basis(a_u: np.ndarray, n_null: int) -> tuple[np.ndarray, np.ndarray]:
     return vt[keep:].T, (vt[:keep].T, s[:keep])
 
 
+class _FixedSpan:
+    """The span of the null rows ``v0[fixed]`` kept as it grows one row at a time: an
+    orthonormal basis ``q`` (k, d) of it (Gram-Schmidt, twice), the rows of ``v0`` with that
+    span taken out, and ``c`` the smallest move zeroing the minimum-norm solution ``u`` at the
+    fixed rows (``v0[fixed] c = u[fixed]``, solved by forward substitution on the triangular
+    factor). Each added row costs O(n d), where solving the fixed set afresh took an SVD and a
+    least-squares solve of (k, d) per choice."""
+
+    def __init__(self, v0: np.ndarray, u: np.ndarray) -> None:
+        self.v0, self.u = v0, u
+        d = v0.shape[1]
+        self.q = np.zeros((0, d))
+        self.outside = v0.copy()
+        self.y = np.zeros(0)  # c's coordinates in q
+        self.c = np.zeros(d)
+
+    def add(self, j: int) -> None:
+        row = self.v0[j]
+        along = self.q @ row
+        r = row - along @ self.q
+        again = self.q @ r  # a second pass keeps q orthonormal to round-off
+        r -= again @ self.q
+        along = along + again
+        size = float(np.linalg.norm(r))
+        if not size > 0:  # in the span already: nothing new to hold
+            return
+        qn = r / size
+        self.y = np.append(self.y, (self.u[j] - along @ self.y) / size)
+        self.q = np.vstack([self.q, qn])
+        self.c = self.y @ self.q
+        self.outside -= np.outer(self.outside @ qn, qn)
+
+
 def _next_fixed(
-    v0: np.ndarray, u: np.ndarray, fixed: list[int], member: np.ndarray, norms: np.ndarray
+    span: _FixedSpan, fixed: list[int], member: np.ndarray, norms: np.ndarray
 ) -> int:
     """The parameter whose fixing, beside ``fixed``, needs the smallest null-space move of the
     minimum-norm solution ``u`` (ties within TIE: the later one); -1 when none removes a new
@@ -63,13 +96,7 @@ def _next_fixed(
     ``fixed`` and ``p_j`` the part of row j of ``v0`` outside the fixed rows' span, fixing j
     as well moves by sqrt(|c|^2 + (u_j - v0_j . c)^2 / |p_j|^2) (a Schur complement), which is
     what solving each candidate's least-squares problem gave, in O(n d) instead of O(n d^3)."""
-    d = v0.shape[1]
-    if fixed:
-        q = np.linalg.svd(v0[fixed], full_matrices=False)[2]  # (k, d) the fixed rows' span
-        c = np.linalg.lstsq(v0[fixed], u[fixed], rcond=None)[0]
-        outside = v0 - (v0 @ q.T) @ q
-    else:
-        c, outside = np.zeros(d), v0
+    c, outside, v0, u = span.c, span.outside, span.v0, span.u
     left = np.linalg.norm(outside, axis=1)
     new = member & (left > MEMBER_RTOL * norms)
     new[fixed] = False
@@ -106,11 +133,15 @@ def choose_fixed(
     norms = np.linalg.norm(v0, axis=1)
     member = norms > MEMBER_RTOL * norms.max()
     fixed: list[int] = [int(j) for j in np.flatnonzero(zero)]
+    span = _FixedSpan(v0, u)
+    for j in fixed:
+        span.add(j)
     while len(fixed) < n_null:
-        best = _next_fixed(v0, u, fixed, member, norms)
+        best = _next_fixed(span, fixed, member, norms)
         if best < 0:
             break
         fixed.append(best)
+        span.add(best)
     fixed_arr = np.array(sorted(fixed), dtype=int)
     partners: dict[int, tuple[int, ...]] = {}
     with_reg: dict[int, bool] = {}
