@@ -117,13 +117,18 @@ def analyse(jac: np.ndarray, names: tuple[str, ...] | list[str]) -> Identifiabil
     identifiable_idx = sorted(order)
     reasons: dict[str, str] = {}
     sub = scaled[:, identifiable_idx]
+    chosen = set(identifiable_idx)
+    # every other effective column on the identifiable ones, in one least-squares solve
+    combined = [j for j in range(n) if j not in chosen and not zero[j]]
+    coefs = np.linalg.lstsq(sub, scaled[:, combined], rcond=None)[0] if combined else None
     for j in range(n):
-        if j in identifiable_idx:
+        if j in chosen:
             continue
         if zero[j]:
             reasons[names[j]] = "has no effect on the measurements (zero Jacobian column)"
             continue
-        coef, *_ = np.linalg.lstsq(sub, scaled[:, j], rcond=None)
+        assert coefs is not None
+        coef = coefs[:, combined.index(j)]
         top = np.argsort(-np.abs(coef))[:3]
         terms = " ".join(
             f"{'+' if coef[t] >= 0 else '-'} {abs(coef[t]):.3g} {names[identifiable_idx[t]]}"
