@@ -251,11 +251,19 @@ def pose_chunks(n: int, workers: int) -> list[slice]:
 
 def run_chunks(work: Callable[[slice], None], chunks: Sequence[slice]) -> None:
     """``work(chunk)`` for every chunk, side by side on the kept pool (the kernels release the
-    GIL); in the calling thread when there is one chunk or the caller is itself a pool
-    thread (no nested waits on the pool)."""
+    GIL), the first in the calling thread (it would only wait: one hand-off fewer, and on
+    a busy machine no wait for a pool thread to be scheduled); every chunk in the calling
+    thread when there is one or the caller is itself a pool thread (no nested waits on the
+    pool). Each chunk writes its own poses: the results do not depend on who runs it."""
     if len(chunks) == 1 or threading.current_thread().name.startswith(POOL_PREFIX):
         for sl in chunks:
             work(sl)
         return
-    for f in [_shared_pool(len(chunks)).submit(work, sl) for sl in chunks]:
+    futures = [_shared_pool(len(chunks) - 1).submit(work, sl) for sl in chunks[1:]]
+    try:
+        work(chunks[0])
+    finally:
+        for f in futures:  # every chunk finished (or failed) before the caller goes on
+            f.exception()
+    for f in futures:
         f.result()
