@@ -85,7 +85,7 @@ def pivoted_qr_order(a: np.ndarray, rank: int) -> list[int]:
     for k in range(min(rank, m)):
         norms = np.linalg.norm(r[k:, remaining], axis=0)
         top = norms.max()
-        best = next(j for j, v in zip(remaining, norms, strict=True) if v >= top * (1 - TIE))
+        best = remaining[int(np.argmax(norms >= top * (1 - TIE)))]  # the first within TIE
         chosen.append(best)
         remaining.remove(best)
         x = r[k:, best].copy()

@@ -70,6 +70,24 @@ class _FixedSpan:
         self.y = np.zeros(0)  # c's coordinates in q
         self.c = np.zeros(d)
 
+    def add_all(self, rows: list[int]) -> None:
+        """Rows added at once (to an empty span) by one QR factorisation, ``v0[rows] = L q``
+        with ``L`` lower triangular; one by one where they are not clearly independent."""
+        if len(self.q) or not 0 < len(rows) <= self.v0.shape[1]:
+            for j in rows:
+                self.add(j)
+            return
+        qt, r = np.linalg.qr(self.v0[rows].T)
+        diag = np.abs(np.diag(r))
+        if not np.all(diag > 1e-8 * max(1.0, float(diag.max()))):
+            for j in rows:
+                self.add(j)
+            return
+        self.q = qt.T
+        self.y = np.linalg.solve(r.T, self.u[rows])
+        self.c = self.y @ self.q
+        self.outside = self.v0 - (self.v0 @ qt) @ self.q
+
     def add(self, j: int) -> None:
         row = self.v0[j]
         along = self.q @ row
@@ -134,8 +152,7 @@ def choose_fixed(
     member = norms > MEMBER_RTOL * norms.max()
     fixed: list[int] = [int(j) for j in np.flatnonzero(zero)]
     span = _FixedSpan(v0, u)
-    for j in fixed:
-        span.add(j)
+    span.add_all(fixed)
     while len(fixed) < n_null:
         best = _next_fixed(span, fixed, member, norms)
         if best < 0:
