@@ -29,6 +29,7 @@ from twin.kinematics.compiled import (
     CompiledPlan,
     compiled_numbers,
     compiled_plan,
+    kernels_pay,
     pose_chunks,
     processors,
     run_chunks,
@@ -91,15 +92,17 @@ def forward_batch(
     nthread: int = 0,
     start: np.ndarray | None = None,
     check_stroke: bool = True,
-    compiled: bool = True,
+    compiled: bool | None = None,
 ) -> BatchSolution:
     """Forward kinematics for commands (N, A) (SI); raises ClosureError naming failed poses.
 
     ``start``: one configuration (nq,) or one per pose (N, nq), e.g. the previous solution
     when the same poses are solved again for slightly different parameters. ``nthread``: 0
     for one thread per processor (used only for many poses), else at most that many.
-    ``compiled``: the compiled kernels (twin.kinematics.compiled) where they cover the machine,
-    else (or when False) the numpy path; both give the same solutions to round-off.
+    ``compiled``: True, the compiled kernels (twin.kinematics.compiled) where they cover the
+    machine, else the numpy path; False, the numpy path; None (default), the kernels where
+    they pay for their start (twin.kinematics.compiled.kernels_pay). Both give the same
+    solutions to round-off.
     """
     commands = np.atleast_2d(np.asarray(commands, dtype=float))
     if commands.shape[1:] != (mech.n_actuators,):
@@ -125,7 +128,8 @@ def forward_batch(
     qpos = np.array(np.broadcast_to(q0, (n, m.nq)))
     qpos[:, mech.actuator_qpos] = mech.joints_of_commands(commands)
     fk = fast_kinematics(mech)
-    plan = compiled_plan(fk) if compiled else None
+    kernels = kernels_pay(fk, n) if compiled is None else compiled
+    plan = compiled_plan(fk) if kernels else None
     if plan is not None:
         return _forward_compiled(fk, plan, qpos, commands, start is None, nthread)
     q = np.ascontiguousarray(qpos.T)  # (nq, N)

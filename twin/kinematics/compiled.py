@@ -44,6 +44,22 @@ def int_array(x) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(x, dtype=np.int64))
 
 
+# a serial chain of fewer poses than this is solved on the numpy path: there its explicit
+# forward kinematics and Jacobian cost some 0.2-0.5 ms more per call (20-256 poses of a 6R
+# arm), where the kernels' first use in a process (importing numba, loading the cached
+# machine code) costs half a second or more: a command line on a small serial campaign
+# answers without it. A serial chain has no Newton: the two paths compute the same
+# expressions (bitwise equal fits of the 6R arm and the UR5 here); a closed chain always
+# takes the kernels (its Newton stops within tolerance, the paths' stops differ)
+SERIAL_KERNEL_MIN = 64
+
+
+def kernels_pay(fk: FastKinematics, n_poses: int) -> bool:
+    """Whether ``n_poses`` poses of ``fk``'s machine go to the compiled kernels by default:
+    a closed chain always, a serial chain from SERIAL_KERNEL_MIN poses."""
+    return fk.closure is not None or n_poses >= SERIAL_KERNEL_MIN
+
+
 def compiled_plan(fk: FastKinematics) -> CompiledPlan | None:
     """The plan of ``fk``'s machine (kept with its structure), or None when the kernels do
     not cover it (a reduced closure system with fewer equations than shared unknowns)."""

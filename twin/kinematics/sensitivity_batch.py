@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.kinematics.adjoint import adjoint_solve
-from twin.kinematics.compiled import compiled_plan
+from twin.kinematics.compiled import compiled_plan, kernels_pay
 from twin.kinematics.reduced import ClosureStructure, cross_soa
 from twin.kinematics.sensitivity_compiled import jacobian_compiled
 from twin.kinematics.structure import (
@@ -241,7 +241,7 @@ def _batched(
     if not len(qpos):
         return np.zeros((0, len(out.sites) * out.rows, len(params)))
     fk = fast_kinematics(mech)
-    plan = compiled_plan(fk) if COMPILED else None
+    plan = compiled_plan(fk) if COMPILED and kernels_pay(fk, len(qpos)) else None
     if plan is not None and (fk.closure is None or fk.closure.square):  # pose by pose
         return jacobian_compiled(fk, plan, params, values, qpos, out.sites, out.moves, out.angular)
     with one_blas_thread():
