@@ -105,9 +105,7 @@ class _FixedSpan:
         self.outside -= np.outer(self.outside @ qn, qn)
 
 
-def _next_fixed(
-    span: _FixedSpan, fixed: list[int], member: np.ndarray, norms: np.ndarray
-) -> int:
+def _next_fixed(span: _FixedSpan, fixed: list[int], member: np.ndarray, norms: np.ndarray) -> int:
     """The parameter whose fixing, beside ``fixed``, needs the smallest null-space move of the
     minimum-norm solution ``u`` (ties within TIE: the later one); -1 when none removes a new
     null dimension. All candidates at once: with ``c`` the smallest move zeroing ``u`` at
@@ -173,9 +171,7 @@ def choose_fixed(
         size = np.abs(direction)
         # the candidates above the threshold first (a set, not the array, for membership)
         big = np.flatnonzero(size > MEMBER_RTOL * size.max())
-        others = [
-            int(i) for i in big[np.argsort(-size[big], kind="stable")] if int(i) not in held
-        ]
+        others = [int(i) for i in big[np.argsort(-size[big], kind="stable")] if int(i) not in held]
         partners[int(j)] = tuple(others)
         moved = 0.0
         if unprojected is not None:
