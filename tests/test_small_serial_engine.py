@@ -21,7 +21,12 @@ from calib.fit.model import CalibrationModel, Prediction
 from twin.formats.parameter_file import load_parameter_set
 from twin.kinematics import compiled
 from twin.kinematics.batch import forward_batch
-from twin.kinematics.compiled import SERIAL_KERNEL_MIN, kernels_pay
+from twin.kinematics.compiled import (
+    SERIAL_KERNEL_MIN,
+    SERIAL_PARALLEL_MIN,
+    kernels_pay,
+    parallel_min,
+)
 from twin.kinematics.structure import fast_kinematics
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,6 +38,9 @@ def test_only_a_small_serial_batch_leaves_the_kernels():
     assert not kernels_pay(fast_kinematics(arm), SERIAL_KERNEL_MIN - 1)
     assert kernels_pay(fast_kinematics(arm), SERIAL_KERNEL_MIN)
     assert kernels_pay(fast_kinematics(hexapod), 1)
+    # threads only for a closed chain's batches, or a serial chain's very large ones
+    assert parallel_min(fast_kinematics(hexapod), 256) == 256
+    assert parallel_min(fast_kinematics(arm), 256) == SERIAL_PARALLEL_MIN > 256
 
 
 def test_small_serial_batch_equals_the_kernels_bit_for_bit(monkeypatch):

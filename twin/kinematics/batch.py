@@ -30,6 +30,7 @@ from twin.kinematics.compiled import (
     compiled_numbers,
     compiled_plan,
     kernels_pay,
+    parallel_min,
     pose_chunks,
     processors,
     run_chunks,
@@ -192,7 +193,8 @@ def _forward_compiled(
     out_rot = np.empty((n, 3, 3))
     residual = np.empty(n)
     iterations = np.zeros(n, dtype=np.int64)
-    chunks = pose_chunks(n, 1 if n < COMPILED_PARALLEL_MIN else (nthread or processors()))
+    least = parallel_min(fk, COMPILED_PARALLEL_MIN)
+    chunks = pose_chunks(n, 1 if n < least else (nthread or processors()))
 
     def work(sl: slice) -> None:
         solve_compiled(plan, numbers, q[sl], out_pos[sl], out_rot[sl], residual[sl],

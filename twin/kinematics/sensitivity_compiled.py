@@ -19,6 +19,7 @@ from twin.kinematics.compiled import (
     compiled_numbers,
     int_array,
     own_copy,
+    parallel_min,
     pose_chunks,
     processors,
     run_chunks,
@@ -97,7 +98,7 @@ def jacobian_compiled(
     qs = np.ascontiguousarray(qpos, dtype=float)
     n_pose, m_rows, n_par = len(qs), len(sites) * (6 if angular else 3), len(params)
     out = np.empty((n_pose, m_rows, n_par))
-    chunks = pose_chunks(n_pose, 1 if n_pose < PARALLEL_MIN else processors())
+    chunks = pose_chunks(n_pose, 1 if n_pose < parallel_min(fk, PARALLEL_MIN) else processors())
 
     def work(sl: slice) -> None:  # arrays of its own (see kinematics_compiled.solve_compiled)
         part = np.empty((sl.stop - sl.start, m_rows, n_par))
