@@ -78,19 +78,31 @@ def grid_offsets(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridOffs
     if key not in prob._cache:
         assert cand.offsets is not None and ctx.j_act is not None
         grid = np.asarray(grid, dtype=float)
-        chunks = []
-        for lo in range(0, len(grid), GRID_CHUNK):
-            chunks.append(cand.offsets_at(ctx, grid[lo : lo + GRID_CHUNK]))  # (N, s, A, k)
-        used = np.zeros(chunks[0].shape[2:], bool)
-        for oc in chunks:
-            used |= np.any(oc != 0, axis=(0, 1))
-        act, col = np.nonzero(used)
-        o = np.concatenate([oc[:, :, act, col] for oc in chunks], axis=1)  # (N, S, P)
+        if cand.offset_pairs is not None:
+            o, act, col, k = _pairs_used(cand.offset_pairs(ctx, grid))
+        else:
+            chunks = []
+            for lo in range(0, len(grid), GRID_CHUNK):
+                chunks.append(cand.offsets_at(ctx, grid[lo : lo + GRID_CHUNK]))  # (N, s, A, k)
+            used = np.zeros(chunks[0].shape[2:], bool)
+            for oc in chunks:
+                used |= np.any(oc != 0, axis=(0, 1))
+            act, col = np.nonzero(used)
+            o = np.concatenate([oc[:, :, act, col] for oc in chunks], axis=1)  # (N, S, P)
+            k = used.shape[1]
         j = ctx.j_act if ctx.rows is None else ctx.j_act * ctx.rows[:, :, None]
-        prob._cache[key] = GridOffsets(
-            np.ascontiguousarray(o.transpose(2, 0, 1)), act, col, j, used.shape[1]
-        )
+        prob._cache[key] = GridOffsets(np.ascontiguousarray(o.transpose(2, 0, 1)), act, col, j, k)
     return prob._cache[key]
+
+
+def _pairs_used(pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A candidate's offset pairs as the dense offsets give them: the pairs with a nonzero
+    value, ordered by actuator then parameter (``np.nonzero`` of the (A, k) pattern)."""
+    o, act, col, k = pairs
+    used = np.any(o != 0, axis=(0, 1))
+    order = np.lexsort((col[used], act[used]))
+    keep = np.flatnonzero(used)[order]
+    return o[:, :, keep], act[keep], col[keep], k
 
 
 @dataclass(frozen=True)
