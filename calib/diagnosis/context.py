@@ -23,7 +23,7 @@ import numpy as np
 from calib.diagnosis.gravity import GravityLoads, gravity_loads
 from calib.fit.model import CalibrationModel
 from twin.kinematics.closure import update_kinematics
-from twin.kinematics.sensitivity_batch import target_jacobian_batch
+from twin.kinematics.sensitivity import target_jacobian
 from twin.parameters import Parameter, ParameterSet
 from twin.rotations import matrix_from_quat
 
@@ -147,17 +147,15 @@ def extra_parameters(model: CalibrationModel) -> dict[str, list[Parameter]]:
 def sensitivities(
     model: CalibrationModel, values: np.ndarray, qpos: np.ndarray, with_extra: bool = True
 ) -> tuple[np.ndarray, ExtraGeometry | None]:
-    """Actuator-offset columns (N, R, A) and the extra geometric columns: the Jacobian of
-    every pose over one parameter set, in one batch (the compiled kernel where there is
-    one)."""
+    """Actuator-offset columns (N, R, A) and the extra geometric columns, one Jacobian per
+    pose over one parameter set."""
     offsets = actuator_offsets(model)
     groups = extra_parameters(model) if with_extra else {}
     plist = list(offsets.parameters) + [p for g in groups.values() for p in g]
     mech = model.mechanism(values)
     pset = ParameterSet(plist, mech.model)
     zero = np.zeros(len(pset))
-    n_rows = 3 * len(mech.target_sites)
-    jac = target_jacobian_batch(mech, pset, zero, qpos).reshape(len(qpos), n_rows, len(pset))
+    jac = np.array([target_jacobian(mech, pset, zero, q) for q in qpos])  # (N, R, n)
     a = len(offsets)
     j_act = jac[:, :, :a]
     if not with_extra:
