@@ -331,6 +331,20 @@ def choose_shape(
     return finalists[int(np.argmin(scores))]
 
 
+def inner_folds(ctx: Context, poses: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The (training, held-out) pose masks of the inner cross-validation of ``poses``."""
+    idx = np.flatnonzero(poses)
+    labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
+    out = []
+    for f in range(INNER_FOLDS):
+        train = np.zeros_like(poses)
+        train[idx[labels != f]] = True
+        test = np.zeros_like(poses)
+        test[idx[labels == f]] = True
+        out.append((train, test))
+    return out
+
+
 def _inner_cv(
     prob: Problem, fixed: list[np.ndarray], xs: list[np.ndarray], ctx: Context, poses: np.ndarray
 ) -> list[float]:
@@ -338,14 +352,8 @@ def _inner_cv(
     its finalist shapes) by an inner cross-validation of ``poses``: per finalist, the sum over
     the folds of :func:`heldout_sse` after :func:`fit`, with what does not depend on the
     finalist (the fold's basis, residual and fixed columns) taken once per fold."""
-    idx = np.flatnonzero(poses)
-    labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
     scores = [0.0] * len(xs)
-    for f in range(INNER_FOLDS):
-        train = np.zeros_like(poses)
-        train[idx[labels != f]] = True
-        test = np.zeros_like(poses)
-        test[idx[labels == f]] = True
+    for train, test in inner_folds(ctx, poses):
         q, gplus = prob.basis(train)
         rt, rp = prob.projected_residual(train)
         r_test, geo_test = prob.r[test], prob.geo[test]
