@@ -134,6 +134,33 @@ def test_offsets_of_many_shapes_are_the_offsets_of_each(setup):
         np.testing.assert_array_equal(cand.offsets_at(ctx, grid), each)
 
 
+def test_offset_pairs_are_the_nonzero_offsets(setup):
+    """A candidate's offsets as (actuator, parameter) pairs hold every nonzero value of its
+    dense offsets, bit for bit, and zeros only elsewhere; the grid's offsets from them are
+    those from the dense array (one commanded-still actuator: its pairs all zero, dropped)."""
+    ctx, prob = setup
+    still = dataclasses.replace(ctx, commands=ctx.commands.copy())
+    still.commands[:, 1] = 0.0  # sin of a zero phase: a pair the dense path never keeps
+    for c in (ctx, still):
+        cand = next(k for k in library(c, masses_defaulted=True) if k.name == "lead_error")
+        assert cand.offset_pairs is not None
+        grid = np.asarray(cand.grid(c), dtype=float)
+        dense = cand.offsets_at(c, grid)
+        o, act, col, k = cand.offset_pairs(c, grid)
+        assert k == dense.shape[3]
+        np.testing.assert_array_equal(o, dense[:, :, act, col])
+        rest = dense.copy()
+        rest[:, :, act, col] = 0.0
+        assert not np.any(rest)
+        fast = grid_offsets(prob, cand, c, grid)
+        slow = grid_offsets(
+            Problem(prob.r, prob.geo), dataclasses.replace(cand, offset_pairs=None), c, grid
+        )
+        for a, b in ((fast.o, slow.o), (fast.act, slow.act), (fast.col, slow.col)):
+            np.testing.assert_array_equal(a, b)
+        assert fast.k == slow.k
+
+
 def test_one_actuator_candidates_move_one_actuator_per_parameter(setup):
     """The flag lets the design take J_act D as one matrix product: it must hold at every
     shape, and the product must then be einsum's sum bit for bit."""

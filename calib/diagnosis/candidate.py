@@ -14,6 +14,9 @@ from calib.diagnosis.context import Context
 
 Offsets = Callable[[Context, float], np.ndarray]  # (N, A, k) actuator offsets per parameter
 ManyOffsets = Callable[[Context, np.ndarray], np.ndarray]  # (N, S, A, k) at S shapes at once
+# the offsets at S shapes as their (actuator, parameter) pairs: o (N, S, P), act (P,),
+# col (P,) and k, the values of ManyOffsets at [:, :, act, col] (zero elsewhere)
+PairOffsets = Callable[[Context, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, int]]
 Columns = Callable[[Context, float], np.ndarray]  # (N, R, k) identification columns
 Grid = Callable[[Context], np.ndarray]
 
@@ -48,6 +51,7 @@ class Candidate:
     factors: tuple[float, ...]  # SI value x factor = display value
     offsets: Offsets | None = None
     offsets_many: ManyOffsets | None = None  # the offsets at many shapes in one computation
+    offset_pairs: PairOffsets | None = None  # ... as the pairs that can be nonzero, no zeros
     # each parameter offsets one actuator (diagonal offsets): every value of J_act D is then a
     # single product, whatever the order of the sum, and a batched matrix product forms it
     one_actuator: bool = False

@@ -100,6 +100,16 @@ def _lead_many(ctx: Context, pitches: np.ndarray) -> np.ndarray:
     return _sin_cos((2 * np.pi * ctx.commands)[:, None, :] / pitches[None, :, None], ctx.is_slide)
 
 
+def _lead_pairs(ctx: Context, pitches: np.ndarray):
+    """:func:`_lead_many` as its (actuator, parameter) pairs (sin of each prismatic actuator,
+    then cos): the same phases and sines, without the zeros of the (N, S, A, k) array."""
+    idx = np.flatnonzero(ctx.is_slide)
+    phase = (2 * np.pi * ctx.commands)[:, None, :] / pitches[None, :, None]
+    part = phase[..., idx]  # contiguous, as _sin_cos takes it
+    o = np.concatenate([np.sin(part), np.cos(part)], axis=2)
+    return o, np.concatenate([idx, idx]), np.arange(2 * len(idx)), 2 * len(idx)
+
+
 def _eccentricity(ctx: Context, harmonic: float) -> np.ndarray:
     return _sin_cos(harmonic * ctx.commands, ~ctx.is_slide)
 
@@ -241,6 +251,7 @@ def default_candidates(
                 offsets=_lead,
                 one_actuator=True,
                 offsets_many=_lead_many,
+                offset_pairs=_lead_pairs,
                 grid=_pitch_grid,
                 shape_name="pitch",
                 shape_unit="mm",

@@ -22,7 +22,7 @@ import numpy as np
 from calib.diagnosis.candidate import Candidate
 from calib.diagnosis.context import Context
 from calib.diagnosis.problem import RCOND, Fit, Problem, _flat, fit, heldout_sse
-from calib.diagnosis.shape_scan import choose_shape, rss_over_grid
+from calib.diagnosis.shape_scan import choose_shape, inner_folds, rss_over_grid
 
 
 def lower_bounds(cands: list[Candidate], xs: list[np.ndarray]) -> np.ndarray | None:
@@ -96,6 +96,17 @@ def evaluate(
         sizes=tuple(x.shape[2] for x in xs),
         n_rows=n_rows,
     )
+
+
+def shared_bases(prob: Problem, ctx: Context, folds: dict[str, np.ndarray]) -> None:
+    """The projection bases and residuals every candidate's :func:`evaluate` reads, into
+    ``prob``'s cache: of each outer training set, all poses, and their inner folds' training
+    sets (the same numbers as when a candidate's evaluation first asks for them)."""
+    sets = [labels != f for labels in folds.values() for f in range(int(labels.max()) + 1)]
+    for train in [*sets, np.ones(ctx.n_poses, bool)]:
+        prob.projected_residual(train)
+        for inner, _ in inner_folds(ctx, train):
+            prob.projected_residual(inner)
 
 
 @dataclass(frozen=True)

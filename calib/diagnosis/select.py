@@ -20,7 +20,8 @@ import numpy as np
 
 from calib.diagnosis.candidate import Candidate
 from calib.diagnosis.context import Context
-from calib.diagnosis.fit import Evaluation, evaluate
+from calib.diagnosis.fit import Evaluation, evaluate, shared_bases
+from calib.diagnosis.parallel import Progress, map_in_order, worker_count
 from calib.diagnosis.problem import SCHEMES, Problem
 from calib.diagnosis.verdict import improvement, refusal
 
@@ -54,12 +55,20 @@ def select_effects(
     when the residual is what the noise explains (None: the residual exceeds the noise)."""
     base = evaluate(prob, ctx, fold_sets, [], None, n_rows)
     singles, refused = {}, {}
-    for c in cands:
-        ev = evaluate(prob, ctx, fold_sets, [c], None, n_rows)
+    workers = worker_count(prob.r.size, len(cands))
+    if workers > 1:  # computed once here, read by every worker
+        shared_bases(prob, ctx, fold_sets)
+
+    def alone(i: int) -> tuple[Evaluation, str]:
+        ev = evaluate(prob, ctx, fold_sets, [cands[i]], None, n_rows)
+        return ev, refusal(prob, ctx, [cands[i]], ev)
+
+    progress = Progress("candidates", len(cands), workers)
+    for c, (ev, why) in zip(cands, map_in_order(alone, len(cands), workers), strict=True):
         singles[c.name] = ev
-        why = refusal(prob, ctx, [c], ev)
         if why:
             refused[c.name] = why
+        progress.step(c.name)
     helps = {
         k: all(v.heldout_rms_mm(s) < base.heldout_rms_mm(s) for s in SCHEMES)
         for k, v in singles.items()
@@ -96,17 +105,31 @@ def select_effects(
     sel = Selection(base, singles, refused, current=base)
     while len(sel.chosen) < max_effects:
         trials = []
-        for c in cands:
-            if c in sel.chosen or c.name in refused:
-                continue
-            if sel.chosen and not helps[c.name]:  # no help alone: not tried in a combination
-                continue
-            new_c = [*sel.chosen, c]
-            ev = (
-                singles[c.name]
-                if not sel.chosen
-                else evaluate(prob, ctx, fold_sets, new_c, sel.current, n_rows)
+        tried = [
+            c
+            for c in cands
+            if c not in sel.chosen
+            and c.name not in refused
+            and (not sel.chosen or helps[c.name])  # no help alone: not tried in a combination
+        ]
+        if sel.chosen:
+            chosen, current = list(sel.chosen), sel.current
+
+            def combined(i: int, chosen=chosen, current=current, tried=tried) -> Evaluation:
+                return evaluate(prob, ctx, fold_sets, [*chosen, tried[i]], current, n_rows)
+
+            many = min(workers, len(tried))
+            progress = Progress(
+                f"combinations with {'+'.join(c.name for c in chosen)}", len(tried), many
             )
+            evs = []
+            for c, ev in zip(tried, map_in_order(combined, len(tried), many), strict=True):
+                evs.append(ev)
+                progress.step(c.name)
+        else:
+            evs = [singles[c.name] for c in tried]
+        for c, ev in zip(tried, evs, strict=True):
+            new_c = [*sel.chosen, c]
             ok, why = passes(sel.current, sel.chosen, ev, new_c)
             if ok and sel.chosen:
                 bad = refusal(prob, ctx, new_c, ev)

@@ -78,19 +78,31 @@ def grid_offsets(prob: Problem, cand: Candidate, ctx: Context, grid) -> GridOffs
     if key not in prob._cache:
         assert cand.offsets is not None and ctx.j_act is not None
         grid = np.asarray(grid, dtype=float)
-        chunks = []
-        for lo in range(0, len(grid), GRID_CHUNK):
-            chunks.append(cand.offsets_at(ctx, grid[lo : lo + GRID_CHUNK]))  # (N, s, A, k)
-        used = np.zeros(chunks[0].shape[2:], bool)
-        for oc in chunks:
-            used |= np.any(oc != 0, axis=(0, 1))
-        act, col = np.nonzero(used)
-        o = np.concatenate([oc[:, :, act, col] for oc in chunks], axis=1)  # (N, S, P)
+        if cand.offset_pairs is not None:
+            o, act, col, k = _pairs_used(cand.offset_pairs(ctx, grid))
+        else:
+            chunks = []
+            for lo in range(0, len(grid), GRID_CHUNK):
+                chunks.append(cand.offsets_at(ctx, grid[lo : lo + GRID_CHUNK]))  # (N, s, A, k)
+            used = np.zeros(chunks[0].shape[2:], bool)
+            for oc in chunks:
+                used |= np.any(oc != 0, axis=(0, 1))
+            act, col = np.nonzero(used)
+            o = np.concatenate([oc[:, :, act, col] for oc in chunks], axis=1)  # (N, S, P)
+            k = used.shape[1]
         j = ctx.j_act if ctx.rows is None else ctx.j_act * ctx.rows[:, :, None]
-        prob._cache[key] = GridOffsets(
-            np.ascontiguousarray(o.transpose(2, 0, 1)), act, col, j, used.shape[1]
-        )
+        prob._cache[key] = GridOffsets(np.ascontiguousarray(o.transpose(2, 0, 1)), act, col, j, k)
     return prob._cache[key]
+
+
+def _pairs_used(pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A candidate's offset pairs as the dense offsets give them: the pairs with a nonzero
+    value, ordered by actuator then parameter (``np.nonzero`` of the (A, k) pattern)."""
+    o, act, col, k = pairs
+    used = np.any(o != 0, axis=(0, 1))
+    order = np.lexsort((col[used], act[used]))
+    keep = np.flatnonzero(used)[order]
+    return o[:, :, keep], act[keep], col[keep], k
 
 
 @dataclass(frozen=True)
@@ -319,6 +331,20 @@ def choose_shape(
     return finalists[int(np.argmin(scores))]
 
 
+def inner_folds(ctx: Context, poses: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The (training, held-out) pose masks of the inner cross-validation of ``poses``."""
+    idx = np.flatnonzero(poses)
+    labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
+    out = []
+    for f in range(INNER_FOLDS):
+        train = np.zeros_like(poses)
+        train[idx[labels != f]] = True
+        test = np.zeros_like(poses)
+        test[idx[labels == f]] = True
+        out.append((train, test))
+    return out
+
+
 def _inner_cv(
     prob: Problem, fixed: list[np.ndarray], xs: list[np.ndarray], ctx: Context, poses: np.ndarray
 ) -> list[float]:
@@ -326,14 +352,8 @@ def _inner_cv(
     its finalist shapes) by an inner cross-validation of ``poses``: per finalist, the sum over
     the folds of :func:`heldout_sse` after :func:`fit`, with what does not depend on the
     finalist (the fold's basis, residual and fixed columns) taken once per fold."""
-    idx = np.flatnonzero(poses)
-    labels = fold_labels(ctx.time[idx], INNER_FOLDS, "random", seed=1)
     scores = [0.0] * len(xs)
-    for f in range(INNER_FOLDS):
-        train = np.zeros_like(poses)
-        train[idx[labels != f]] = True
-        test = np.zeros_like(poses)
-        test[idx[labels == f]] = True
+    for train, test in inner_folds(ctx, poses):
         q, gplus = prob.basis(train)
         rt, rp = prob.projected_residual(train)
         r_test, geo_test = prob.r[test], prob.geo[test]

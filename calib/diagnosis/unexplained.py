@@ -58,6 +58,22 @@ MAX_TRAINING_POSES = 1500
 BLOCK = 512  # poses evaluated at once: memory BLOCK x training poses per array
 
 
+def _squared_distances(a: np.ndarray, b: np.ndarray, out: np.ndarray, work: np.ndarray) -> None:
+    """``out`` (n, m) = sum over the d coordinates of (a[:, None] - b[None]) ** 2, coordinate
+    by coordinate into (n, m) arrays: the sum in the order a reduction over a last axis of
+    fewer than 8 values adds them (the same numbers as ``np.sum(..., axis=2)`` of the
+    (n, m, d) differences), without that array or its strided reduction. From 8 values on
+    numpy sums pairwise: that sum itself, for the same numbers."""
+    if a.shape[1] >= 8:
+        np.sum((a[:, None, :] - b[None, :, :]) ** 2, axis=2, out=out)
+        return
+    out.fill(0.0)
+    for k in range(a.shape[1]):
+        np.subtract.outer(a[:, k], b[:, k], out=work)
+        np.multiply(work, work, out=work)
+        out += work
+
+
 def _smooth_all(
     x_train: np.ndarray,
     e_train: np.ndarray,
@@ -70,15 +86,20 @@ def _smooth_all(
     ``self_index`` (len(x_eval),): the training row each evaluated pose is (left out of its
     own smoothing), -1 for none."""
     out = [np.empty((len(x_eval), e_train.shape[1])) for _ in hs]
+    d2 = np.empty((min(BLOCK, len(x_eval)), len(x_train)))
+    diff, w = np.empty_like(d2), np.empty_like(d2)
     for lo in range(0, len(x_eval), BLOCK):
         hi = min(lo + BLOCK, len(x_eval))
-        d2 = np.sum((x_eval[lo:hi, None, :] - x_train[None, :, :]) ** 2, axis=2)
+        _squared_distances(x_eval[lo:hi], x_train, d2[: hi - lo], diff[: hi - lo])
         if self_index is not None:
             own = self_index[lo:hi]
             rows = np.flatnonzero(own >= 0)
             own = own[rows]
         for j, h in enumerate(hs):
-            w = np.exp(-0.5 * d2 / h**2)
+            w = w[: hi - lo]
+            np.multiply(d2[: hi - lo], -0.5, out=w)  # exp(-0.5 d2 / h^2), in place
+            np.divide(w, h**2, out=w)
+            np.exp(w, out=w)
             if self_index is not None:
                 w[rows, own] = 0.0
             total = w.sum(axis=1, keepdims=True)

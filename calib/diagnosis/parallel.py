@@ -1,0 +1,89 @@
+"""The diagnosis's candidates evaluated side by side in worker processes, and its progress line.
+
+Each candidate's nested cross-validation is a function of the problem, the context and the
+folds alone; a worker (a fork of this process: it reads the problem, the candidates and the
+projection bases the parent computed, without copying them) evaluates whole candidates, one
+at a time, with one BLAS thread, and the results come back in the candidates' order. A
+candidate's numbers are therefore those of the serial run, whatever the number of workers.
+
+Workers: ``PKM_DIAGNOSIS_WORKERS`` when set (1: in this process), else the machine's cores
+for a long run (at least ``PARALLEL_MIN_ROWS`` residual rows), else this process. Without
+``fork`` (not Linux/macOS) or inside a worker (a daemon process cannot have children) the
+candidates run here.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+ENV_WORKERS = "PKM_DIAGNOSIS_WORKERS"
+# fewer residual rows: the candidates take about a second or less in all, not worth a fork
+PARALLEL_MIN_ROWS = 20_000
+PROGRESS_AFTER_S = 5.0  # a progress line only once the candidates have taken this long
+
+_TASK: Callable[[int], Any] | None = None  # what a forked worker runs (inherited)
+
+
+def _run(i: int) -> Any:
+    assert _TASK is not None
+    return _TASK(i)
+
+
+def worker_count(n_rows: int, n_tasks: int) -> int:
+    """How many processes evaluate ``n_tasks`` candidates of a problem of ``n_rows`` rows."""
+    typed = os.environ.get(ENV_WORKERS, "").strip()
+    if typed:
+        try:
+            wanted = int(typed)
+        except ValueError:
+            raise ValueError(f"{ENV_WORKERS}={typed!r} is not a whole number") from None
+    else:
+        wanted = (os.cpu_count() or 1) if n_rows >= PARALLEL_MIN_ROWS else 1
+    usable = (
+        "fork" in multiprocessing.get_all_start_methods()
+        and not multiprocessing.current_process().daemon
+    )
+    return max(1, min(wanted, n_tasks)) if usable else 1
+
+
+def map_in_order(fn: Callable[[int], Any], n_tasks: int, workers: int) -> Iterator[Any]:
+    """``fn(0), fn(1), ...`` in that order, computed by ``workers`` forked processes (or
+    here when 1); ``fn`` and what it reads are inherited by the fork, not pickled."""
+    if workers <= 1 or n_tasks <= 1:
+        for i in range(n_tasks):
+            yield fn(i)
+        return
+    global _TASK
+    _TASK = fn
+    try:
+        with multiprocessing.get_context("fork").Pool(workers) as pool:
+            yield from pool.imap(_run, range(n_tasks), chunksize=1)
+    finally:
+        _TASK = None
+
+
+class Progress:
+    """``diagnosis: 3 of 12 candidates evaluated (gain_error) after 7 s`` on stderr, once
+    the work has taken PROGRESS_AFTER_S: nothing on a short run."""
+
+    def __init__(self, what: str, total: int, workers: int = 1) -> None:
+        self.what, self.total, self.workers = what, total, workers
+        self.start = time.perf_counter()
+        self.done = 0
+
+    def step(self, name: str) -> None:
+        self.done += 1
+        elapsed = time.perf_counter() - self.start
+        if elapsed >= PROGRESS_AFTER_S:
+            on = f" on {self.workers} processes" if self.workers > 1 else ""
+            print(
+                f"diagnosis: {self.done} of {self.total} {self.what} evaluated ({name}) after "
+                f"{elapsed:.0f} s{on}",
+                file=sys.stderr,
+                flush=True,
+            )

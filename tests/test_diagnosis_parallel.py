@@ -1,0 +1,105 @@
+"""The diagnosis's candidates in worker processes: the same evaluations, bit for bit, as in one
+process (each candidate is computed whole by one worker, the results taken in the
+candidates' order), on a synthetic problem with two effects in its residual so that the
+forward selection also evaluates combinations; the worker count and the progress line."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from calib.diagnosis import parallel
+from calib.diagnosis.candidates import library
+from calib.diagnosis.context import Context
+from calib.diagnosis.problem import SCHEMES, Problem, fold_labels
+from calib.diagnosis.select import select_effects
+
+N, T, A, P = 120, 3, 6, 12
+
+
+def _problem() -> tuple[Problem, Context, list]:
+    rng = np.random.default_rng(7)
+    slide = np.array([True, True, True, False, False, False])
+    commands = np.where(slide, rng.uniform(0.6, 1.1, (N, A)), rng.uniform(-1.0, 1.0, (N, A)))
+    ctx = Context(
+        commands=commands,
+        time=np.arange(N, dtype=float),
+        previous=commands[0] - 0.01,
+        is_slide=slide,
+        actuator_names=tuple(f"a{i}" for i in range(A)),
+        time_unit="pose",
+        j_act=rng.normal(size=(N, 3 * T, A)),
+        targets=rng.normal(size=(N, T, 3)),
+        head=np.array([1.5, 0.0, 0.3]),
+    )
+    cands = library(ctx, masses_defaulted=True)
+    by = {c.name: c for c in cands}
+    geo = rng.normal(size=(N, 3 * T, P))
+    # a gain error and a screw lead of 7 mm pitch, well above the noise
+    r = by["gain_error"].design(ctx) @ rng.normal(0, 1e-2, A)
+    r = r + by["lead_error"].design(ctx, 7e-3) @ rng.normal(0, 1e-2, 6)
+    r = r + rng.normal(0, 1e-5, r.shape)
+    return Problem(r, geo), ctx, cands
+
+
+def _select(workers: str, monkeypatch):
+    monkeypatch.setenv(parallel.ENV_WORKERS, workers)
+    prob, ctx, cands = _problem()
+    folds = {s: fold_labels(ctx.time, 5, s) for s in SCHEMES}
+    return select_effects(prob, ctx, folds, cands, prob.r.size, 0.01, 0.05, 2, lambda e, c: None)
+
+
+def _same(a, b) -> None:
+    assert a.names == b.names
+    np.testing.assert_array_equal(a.shapes, b.shapes)  # NaN: no shape, equal to NaN here
+    for s in SCHEMES:
+        np.testing.assert_array_equal(a.fold_shapes[s], b.fold_shapes[s])
+    for s in SCHEMES:
+        np.testing.assert_array_equal(a.heldout[s], b.heldout[s])
+    np.testing.assert_array_equal(a.fit.theta, b.fit.theta)
+    np.testing.assert_array_equal(a.fit.beta, b.fit.beta)
+
+
+def test_candidates_in_two_processes_are_those_of_one(monkeypatch):
+    one = _select("1", monkeypatch)
+    two = _select("2", monkeypatch)
+    assert {c.name for c in one.chosen} == {"gain_error", "lead_error"}
+    assert [c.name for c in two.chosen] == [c.name for c in one.chosen]
+    assert one.refused == two.refused and one.why_not == two.why_not
+    assert one.singles.keys() == two.singles.keys()
+    for k in one.singles:
+        _same(one.singles[k], two.singles[k])
+    _same(one.current, two.current)  # a combination, evaluated by a worker in ``two``
+
+
+def test_map_in_order_runs_in_workers_and_keeps_the_order():
+    here = os.getpid()
+    got = list(parallel.map_in_order(lambda i: (i * i, os.getpid()), 7, 2))
+    assert [v for v, _ in got] == [i * i for i in range(7)]
+    assert all(pid != here for _, pid in got)
+    assert list(parallel.map_in_order(lambda i: os.getpid(), 3, 1)) == [here] * 3
+
+
+def test_worker_count(monkeypatch):
+    monkeypatch.delenv(parallel.ENV_WORKERS, raising=False)
+    assert parallel.worker_count(parallel.PARALLEL_MIN_ROWS - 1, 12) == 1  # a short run
+    cores = os.cpu_count() or 1
+    assert parallel.worker_count(parallel.PARALLEL_MIN_ROWS, 12) == min(cores, 12)
+    monkeypatch.setenv(parallel.ENV_WORKERS, "3")
+    assert parallel.worker_count(10, 12) == 3 and parallel.worker_count(10, 2) == 2
+    monkeypatch.setenv(parallel.ENV_WORKERS, "two")
+    with pytest.raises(ValueError, match="PKM_DIAGNOSIS_WORKERS='two' is not a whole number"):
+        parallel.worker_count(10, 12)
+
+
+def test_progress_line_only_on_a_long_run(monkeypatch, capsys):
+    p = parallel.Progress("candidates", 4, 2)
+    p.step("gain_error")
+    assert capsys.readouterr().err == ""  # within PROGRESS_AFTER_S
+    monkeypatch.setattr(parallel, "PROGRESS_AFTER_S", 0.0)
+    p.step("backlash")
+    err = capsys.readouterr().err
+    assert err.startswith("diagnosis: 2 of 4 candidates evaluated (backlash) after ")
+    assert err.rstrip().endswith(" s on 2 processes")
