@@ -20,7 +20,8 @@ from typing import Any
 from calib.cli.common import fit_options
 from calib.cli.verify_correction import correction_scores
 from calib.data import Dataset, read_dataset, result_from_content, result_text
-from calib.fit import CalibrationRun, FitFailed, model_from_files, verify_result
+from calib.exceptions import CalibError
+from calib.fit import CalibrationRun, model_from_files, verify_result
 from calib.loop import fit_with_diagnosis, model_for_result, with_result_content
 from common.atomic_files import json_text
 
@@ -55,15 +56,15 @@ def identify_with_scores(
         run = fit_with_diagnosis(
             base, dataset, diagnosis, where, fit_options(args), geometric, said.append
         )
-    except FitFailed as exc:
+        files = (args.model, args.errors, args.data)
+        result = with_result_content(run, base, files, where, diagnosis)
+        loaded = result_from_content(json.loads(result_text(result)), Path(where))
+        model = model_for_result(model_from_files(args.model, args.errors), loaded.data)
+        ds, set_name = scored
+        v, _ = verify_result(model, loaded, ds, set_name)
+        with_corr = correction_scores(model, loaded, ds, set_name)
+    except CalibError as exc:  # a fit that fails, values the verification cannot use
         return {"failed": str(exc)}
-    files = (args.model, args.errors, args.data)
-    result = with_result_content(run, base, files, where, diagnosis)
-    loaded = result_from_content(json.loads(result_text(result)), Path(where))
-    model = model_for_result(model_from_files(args.model, args.errors), loaded.data)
-    ds, set_name = scored
-    v, _ = verify_result(model, loaded, ds, set_name)
-    with_corr = correction_scores(model, loaded, ds, set_name)
     keys = ("rms_mm", "mean_mm", "max_mm")
     return {
         "fit": FIT,
