@@ -6,7 +6,8 @@ line on them in process (``calib.cli.main``), each command's output into a log b
 files: ``diagnose --out D.json`` names the effect and writes its parameters, ``identify
 --with D.json`` fits them with the geometry, ``verify`` scores that result on the test rows.
 :func:`loop_through_files` returns what the files say (exit codes, the named effect, the
-test RMS of the geometric fit, of the diagnosis's fit and of the result with the effect) and
+test RMS of the geometric fit, what the diagnosis reported (identify --with's fit of its file)
+and its linearised ranking fit reached, and of the result with the effect) and
 :func:`files_loop_sentence` says it from those numbers.
 """
 
@@ -78,6 +79,7 @@ def loop_through_files(
     diag = json.loads(d.read_text()) if d.is_file() else {}
     geometric = _rms(d, "test", "before", "rms_mm")
     reached = _rms(d, "test", "after", "rms_mm")
+    linearised = _rms(d, "test", "after_linearised", "rms_mm")
     with_effect = _rms(v.with_suffix(".json"), "after", "rms_mm")
     effect = diag.get("effect") or {}
     return {
@@ -86,11 +88,14 @@ def loop_through_files(
         "named_effect": diag.get("diagnosed_effect"),
         "added_parameters": [p.get("name") for p in effect.get("added_parameters") or []],
         "sigma_mm_given": sigma_mm,
-        # 3D position error per reading on the test rows (mm): the geometric fit's and the
-        # diagnosis's own fit (diagnosis.json), the result of identify --with (verify.json)
+        # 3D position error per reading on the test rows (mm): the geometric fit's, what the
+        # diagnosis reported (identify --with's fit of its file) and what its linearised fit
+        # that ranked the candidates reached (diagnosis.json), the result of identify --with
+        # (verify.json)
         "test_rms_mm": {
             "geometric_fit": geometric,
             "diagnosis": reached,
+            "diagnosis_linearised": linearised,
             "with_effect": with_effect,
         },
         "with_effect_over_diagnosis": None
@@ -137,8 +142,13 @@ def files_loop_sentence(f: dict[str, Any] | None, in_process_mm: float | None = 
         f"named {f['named_effect']} and wrote {len(f['added_parameters'])} parameters, and "
         "verify of identify --with's result gives a test RMS of "
         f"{t['with_effect']:.4f} mm (3D per reading) against {t['diagnosis']:.4f} mm the "
-        f"diagnosis's own fit reached ({f['with_effect_over_diagnosis']:.2f}x) and "
-        f"{t['geometric_fit']:.4f} mm the geometric fit's "
+        f"diagnosis reported ({f['with_effect_over_diagnosis']:.2f}x"
+        + (
+            ""
+            if t.get("diagnosis_linearised") is None
+            else f"; {t['diagnosis_linearised']:.4f} mm by its linearised ranking fit"
+        )
+        + f") and {t['geometric_fit']:.4f} mm the geometric fit's "
         f"({f['with_effect_over_geometric_fit']:.2f}x)"
     )
     if in_process_mm is not None:

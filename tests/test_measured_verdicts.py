@@ -248,8 +248,8 @@ def test_cobot_with_an_honest_tracker_accuracy_runs_the_loop(cobot, capsys, tmp_
     code, vtext = _verify_test(capsys, cobot, refit, verified_with)
     assert code == EXIT_OK, vtext
     v = json.loads(verified_with.read_text())["after"]
-    # the held-out poses at the tracker noise (3D RMS sqrt(3) x 10 um), as the diagnosis's
-    # own fit reached, and no worse at the largest error
+    # the held-out poses at the tracker noise (3D RMS sqrt(3) x 10 um), as the diagnosis
+    # reported (identify --with's fit of its file), and no worse at the largest error
     assert v["rms_mm"] < 1.1 * noise_3d and v["rms_mm"] < 1.05 * after["rms_mm"]
     assert v["max_mm"] < 1.1 * after["max_mm"]
     # the compensation and the export take the machine with its compliance

@@ -37,6 +37,11 @@ def test_wam_loop_through_files(tmp_path, capsys):
     assert main(["verify", *data, "--result", str(r), "--set", "test"]) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("after"))
     after = float(line.split("RMS")[1].split("mm")[0])
-    # the criterion on twins: within 1.25x of what the diagnosis's own (linearised)
-    # fit reached, and below the geometric fit's
-    assert after <= 1.25 * reached and after < before
+    # the criterion: at most what the diagnosis reached. Its reported figure is
+    # identify --with's fit of its file scored as verify scores it, so the two are equal (to
+    # the 4 decimals printed); the linearised fit that ranked the candidates is kept beside it
+    # (2.3665 mm against 2.3829 mm delivered: the nonlinear fit of the geometry identify keeps,
+    # with the residual correction held)
+    assert after <= reached + 0.5e-4 and after < before
+    assert diag["test"]["after_fit"] == "identify --with's fit"
+    assert diag["test"]["after_linearised"]["rms_mm"] < before

@@ -46,6 +46,7 @@ from __future__ import annotations
 import argparse
 import csv
 import io
+import json
 import os
 import sys
 from pathlib import Path
@@ -66,7 +67,6 @@ from calib.cli.common import (
 )
 from calib.cli.diagnose import cmd_diagnose
 from calib.cli.verify_correction import with_correction
-from calib.correction import correction_in_file
 from calib.data import DatasetError, load_result, read_dataset, result_text, sidecar_path
 from calib.exceptions import CalibError
 from calib.fit import (
@@ -81,7 +81,7 @@ from calib.fit import (
     rejected_rows,
     result_content,
 )
-from calib.loop import model_for_result, parameter_entry
+from calib.loop import model_for_result, parameter_entry, with_result_content
 from common.atomic_files import json_text
 from common.write_set import WriteSetError, write_files
 from twin.exceptions import TwinError
@@ -153,18 +153,18 @@ def cmd_identify(args: argparse.Namespace) -> int:
     _print_run(run)
     print_verdict(run.verdict)
     if args.out:
-        content = result_content(run, args.model, args.errors, args.data)
-        if args.with_effect:
-            content["with"] = str(args.with_effect)
-        # what --with and a kept fuller model added: what verify, compensate, export rebuild
-        base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
-        added = [parameter_entry(p) for p in run.model.params.parameters if p.name not in base]
-        if added:
-            content["added_parameters"] = added
-        if args.with_effect:  # the residual correction held in the fit, for its users
-            held = correction_in_file(args.with_effect, run.model)
-            if held is not None:
-                content["residual_correction"] = held.to_dict(run.model.nominal.name)
+        files = (args.model, args.errors, args.data)
+        if args.with_effect:  # what --with added and held: what verify, compensate, export rebuild
+            diagnosis = json.loads(Path(args.with_effect).read_text(encoding="utf-8"))
+            base = model_from_files(args.model, args.errors)
+            content = with_result_content(run, base, files, args.with_effect, diagnosis)
+        else:
+            content = result_content(run, *files)
+            # a kept fuller model's parameters: what verify, compensate, export rebuild
+            base = {p.name for p in model_from_files(args.model, args.errors).params.parameters}
+            added = [parameter_entry(p) for p in run.model.params.parameters if p.name not in base]
+            if added:
+                content["added_parameters"] = added
         write_files({args.out: result_text(content)}, make_parents=True)
     return run.verdict.exit_code
 

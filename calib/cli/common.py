@@ -3,19 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
+from pathlib import Path
 
-import numpy as np
-
-from calib.correction import correction_in_file, held_dataset
-from calib.data import CalibrationResult, Dataset, read_dataset
+from calib.correction import correction_in_file
+from calib.data import CalibrationResult, read_dataset
 from calib.fit import (
     EXIT_BAD_INPUT,
     EXIT_OK,
     EXIT_POOR_FIT,
     MAX_SIGMA_MM,
-    CalibrationModel,
     CalibrationRun,
     FitFailed,
     PriorSpec,
@@ -23,7 +22,7 @@ from calib.fit import (
     calibrate,
     model_from_files,
 )
-from calib.loop import extended_model, load_effect
+from calib.loop import extended_model, fit_with_diagnosis, load_effect
 
 
 def positive_float(text: str) -> float:
@@ -88,15 +87,27 @@ def failed(exc: FitFailed) -> int:
 
 def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
     model = model_from_files(args.model, args.errors)
-    base = model
     effect = getattr(args, "with_effect", None)
-    correction = None
+    diagnosis = None
     if effect:  # the effect a diagnosis named, as parameters of the error model
         correction = correction_in_file(effect, model)
         block = load_effect(effect, model, allow_empty=correction is not None)
-        model = extended_model(model, block["added_parameters"], effect)
+        extended_model(model, block["added_parameters"], effect)  # its entries checked
+        diagnosis = json.loads(Path(effect).read_text(encoding="utf-8"))
     dataset = read_dataset(args.data, expected_model=model.nominal.name)
-    options = {
+    options = fit_options(args)
+    try:
+        if diagnosis is not None:
+            return fit_with_diagnosis(model, dataset, diagnosis, effect, options)
+        return calibrate(model, dataset, **options)
+    except FitFailed as exc:
+        return failed(exc)
+
+
+def fit_options(args: argparse.Namespace) -> dict:
+    """calib.fit.calibrate's options from the command line's (identify's defaults where
+    the command has no such option)."""
+    return {
         "set_name": args.set,
         "sigma_mm": args.sigma_mm,
         "max_ratio": args.max_ratio,
@@ -105,61 +116,6 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
         "prior_spec": getattr(args, "prior_std", None),
         "regularise": not getattr(args, "plain", False),
     }
-    try:
-        if correction is not None:  # the diagnosis's residual correction, held in the fit
-            dataset = _held(base, dataset, correction, options, effect)
-        start = None
-        if model.n_parameters > base.n_parameters:
-            start, model = _geometric_start(base, model, dataset, options, effect)
-        return calibrate(model, dataset, start=start, **options)
-    except FitFailed as exc:
-        return failed(exc)
-
-
-def _held(base: CalibrationModel, dataset: Dataset, correction, options: dict, where: str):
-    """``dataset``'s readings less the residual correction of the diagnosis ``where`` at
-    each pose (its features from the geometric fit; said)."""
-    geo = calibrate(base, dataset, **{**options, "max_ratio": None})
-    held, inside = held_dataset(
-        dataset, correction, geo.model, geo.result.values, geo.result.registration
-    )
-    print(
-        f"residual correction of {where} held: the readings less it at {inside} of "
-        f"{dataset.n_poses} poses (the others outside the calibrated region), the geometry"
-        " and any named effect refitted to what is left"
-    )
-    return held
-
-
-def _geometric_start(
-    base: CalibrationModel,
-    model: CalibrationModel,
-    dataset: Dataset,
-    options: dict,
-    effect: str,
-) -> tuple[np.ndarray | None, CalibrationModel]:
-    """The start of a fit with a diagnosed effect: the geometric fit's estimate, where the
-    diagnosis formed the effect's columns (an added parameter can move the readings there
-    and not at the nominal model: a joint with the nominal reflector on its axis), the added
-    parameters at zero; None (the nominal start) when the geometric fit is refused. And the
-    model to fit: the geometric fit's own (the error model's fuller variant when identify
-    kept it, calib.fit.fuller_model) with the effect's parameters."""
-    geo = calibrate(base, dataset, **{**options, "max_ratio": None})
-    if not geo.verdict.ok:
-        return None, model
-    if geo.model.n_parameters != base.n_parameters:  # the fuller geometry, and the effect
-        model = extended_model(geo.model, load_effect(effect, geo.model)["added_parameters"])
-        added = ", ".join(geo.model.params.names[base.n_parameters :])
-        print(f"the geometry as identify kept it: the error model and {added}")
-    names = list(model.params.names)
-    start = np.zeros(model.n_parameters)
-    for name, value in zip(geo.result.names, geo.result.values, strict=True):
-        start[names.index(name)] = value
-    print(
-        f"start: the geometric fit's estimate ({geo.residual['rms_mm']:.4f} mm RMS), the "
-        f"{model.n_parameters - geo.model.n_parameters} added parameters at zero"
-    )
-    return start, model
 
 
 def result_options(p: argparse.ArgumentParser) -> None:

@@ -25,21 +25,24 @@ ASSUMED_NOISE = (
 
 def _held_out_rows(
     args: argparse.Namespace, fitted_ids: np.ndarray, model_name: str
-) -> tuple[object, str] | None:
-    """The held-out rows for the diagnosis and a sentence saying which: ``--test-set NAME``
-    of ``--test FILE`` (or of ``--data``); ``--test FILE`` alone: its 'test' rows if it has
-    any, else the rows of the ``--data`` file not fitted, else all of FILE. None without
-    either option."""
+) -> tuple[object, str, tuple[object, str | None]] | None:
+    """The held-out rows for the diagnosis, a sentence saying which, and how ``verify``
+    scores them (a dataset and a set name): ``--test-set NAME`` of ``--test FILE`` (or of
+    ``--data``); ``--test FILE`` alone: its 'test' rows if it has any, else the rows of the
+    ``--data`` file not fitted, else all of FILE. None without either option."""
     if not args.test and not args.test_set:
         return None
     same = not args.test or Path(args.test).resolve() == Path(args.data).resolve()
     path = args.data if same else args.test
     ds = read_dataset(path, expected_model=model_name)
     sets = [str(s) for s in ds.sets]
+    view: tuple[object, str | None] = (ds, None)
     if args.test_set:
         picked, sentence = select_set(ds, args.test_set, "the diagnosis's test")
+        view = (ds, args.test_set)
     elif "test" in sets:
         picked, sentence = select_set(ds, "test", "the diagnosis's test")
+        view = (ds, "test")
     elif same:
         fitted = {int(p) for p in fitted_ids.tolist()}
         mask = np.array([int(p) not in fitted for p in ds.pose_ids.tolist()])
@@ -49,6 +52,7 @@ def _held_out_rows(
                 "give --test-set NAME, or give --test FILE with other poses"
             )
         picked = subset(ds, mask)
+        view = (picked, None)
         sentence = f"{picked.n_poses} poses of {path} not fitted used as the diagnosis's test"
     else:
         picked, sentence = ds, f"all {ds.n_poses} poses of {path} used as the diagnosis's test"
@@ -60,7 +64,7 @@ def _held_out_rows(
                 f"{len(both)} test pose(s) were also fitted (pose_id {both[0]}"
                 f"{' ...' if len(both) > 1 else ''}): a held-out set must hold other poses"
             )
-    return picked, sentence
+    return picked, sentence, view
 
 
 def _diagnosis_test_set(held: tuple[object, str] | None, run: CalibrationRun):
@@ -72,7 +76,7 @@ def _diagnosis_test_set(held: tuple[object, str] | None, run: CalibrationRun):
 
     if held is None:
         return None, ""
-    ds, sentence = held
+    ds, sentence, _ = held
     obs = bind_dataset(run.model.nominal, ds)
     if obs.frame != run.obs.frame:
         raise DatasetError(
@@ -91,7 +95,7 @@ def _diagnosis_test_set(held: tuple[object, str] | None, run: CalibrationRun):
     return test, sentence
 
 
-def _checked_inputs(args: argparse.Namespace) -> tuple[tuple[object, str] | None, Accuracy]:
+def _checked_inputs(args: argparse.Namespace) -> tuple[tuple | None, Accuracy]:
     """What diagnose needs besides the fit, checked before it: the held-out rows and the
     noise level (identify's rule: declared, else the repeats, else the same assumption)."""
     data = read_dataset(args.data)
@@ -169,16 +173,36 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             f"  {name:24s} held-out RMS blocked {score.heldout_blocked_mm:.5f} / random "
             f"{score.heldout_random_mm:.5f} mm{tail}{refused}"
         )
+    effect = effect_content(
+        run.model, diag.chosen, diag.effect_parameters, diag.time_unit, diag.time_origin
+    )
+    refit = effect["added_parameters"] and diag.test is not None and held is not None
     if diag.test is not None:
+        ranked = " (the linearised fit that ranked the candidates)" if refit else ""
         for side in ("before", "after"):
             t = diag.test[side]
+            label = "before" if side == "before" else f"after{ranked or ' '}"
             print(
-                f"test {side:6s}: 3D position error per reading RMS {t['rms_mm']:.4f} mm, "
+                f"test {label}: 3D position error per reading RMS {t['rms_mm']:.4f} mm, "
                 f"mean {t['mean_mm']:.4f} mm, max {t['max_mm']:.4f} mm"
             )
     from calib.cli.diagnose_correction import correction_stage
+    from calib.cli.diagnose_refit import identify_with_scores, scores_sentence
 
-    added, figure = correction_stage(run, obs, diag, test)
+    delivered: dict = {}
+
+    def identify_with(correction: dict | None) -> dict | None:
+        """identify --with of what the diagnosis writes (this correction), scored on the
+        test rows as verify scores it; said, and kept for the file."""
+        got = identify_with_scores(args, run, effect, correction, held[2]) if refit else None
+        if got is not None:
+            print(scores_sentence(got))
+            delivered.update(got)
+        return got
+
+    added, figure = correction_stage(run, obs, diag, test, identify_with)
+    if refit and not delivered:  # no correction stage ran
+        identify_with(None)
     if args.out:
         out = Path(args.out)
         content = {
@@ -198,15 +222,24 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             "effect_parameters": diag.effect_parameters,
             "residual_structure": diag.structure_detail,
             "metric": "3D position error per reading |p_measured - p_model| (mm)",
-            "effect": effect_content(
-                run.model, diag.chosen, diag.effect_parameters, diag.time_unit, diag.time_origin
-            ),
+            "effect": effect,
         }
         if diag.test is not None:
             content["test"] = {
                 side: {k: diag.test[side][k] for k in ("rms_mm", "mean_mm", "max_mm")}
                 for side in ("before", "after")
             }
+            if "after" in delivered:  # the figure reported: what identify --with delivers
+                lin = content["test"]["after"]
+                content["test"].update(
+                    after=delivered["after"],
+                    after_fit=delivered["fit"],
+                    after_linearised=lin,
+                    with_correction=delivered["with_correction"],
+                )
+                content["reason"] += (
+                    f"; {delivered['fit']}: test RMS {delivered['after']['rms_mm']:.4g} mm"
+                )
         content.update(added)
         files: dict = figure(out) if added else {}
         if diag.plot is not None:

@@ -18,10 +18,13 @@ from calib.correction import (
 )
 
 
-def correction_stage(run, obs, diag, test) -> tuple[dict, dict]:
+def correction_stage(run, obs, diag, test, identify_with=None) -> tuple[dict, dict]:
     """Fit and judge the correction on what ``diag`` left, print its verdict and the stage
     table; returns the diagnosis file's additions and the figure to write (path -> writer),
-    keyed by the file's stem later (``figure``: a function of the out path)."""
+    keyed by the file's stem later (``figure``: a function of the out path).
+    ``identify_with``: called with the correction's dict (None when not offered), it returns
+    what identify --with of the diagnosis file reaches on the test set (``after`` and
+    ``with_correction`` stats, or None): the table's effect and correction rows then."""
     left = diag.leftover
     if left is None:
         return {}, {}
@@ -52,6 +55,9 @@ def correction_stage(run, obs, diag, test) -> tuple[dict, dict]:
             "outside the calibrated region get no correction"
         )
     effect = diag.chosen if left.get("named") else "none named"
+    got = None
+    if identify_with is not None:
+        got = identify_with(offer.correction.to_dict(mech.name) if offer.offered else None)
     if tdata is not None:
         nominal = _nominal_rms(run, test.commands, test.measured)
         rms = {
@@ -73,6 +79,10 @@ def correction_stage(run, obs, diag, test) -> tuple[dict, dict]:
         where = "calibration poses; the correction's held out in the cross-validation"
     if offer.correction is None:
         rms["correction"] = rms["effect"]
+    if got is not None and "after" in got:  # what identify --with delivers, on the test set
+        rms["effect"] = got["after"]["rms_mm"]
+        rms["correction"] = (got["with_correction"] or got["after"])["rms_mm"]
+        where += f"; the effect's and the correction's: {got['fit']}"
     if not offer.offered:
         where += "; the correction not offered"
     rows = stage_table(rms)

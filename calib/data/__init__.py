@@ -35,6 +35,7 @@ __all__, __getattr__, __dir__ = face(
             "ResultFileError",
             "correlation_pairs",
             "load_result",
+            "result_from_content",
             "result_text",
             "unusable_values",
         ),

@@ -116,6 +116,11 @@ def load_result(
         data = json.loads(text)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ResultFileError(f"{p} is not a result file (JSON, UTF-8): {exc}") from None
+    return result_from_content(data, p, expected_model)
+
+
+def result_from_content(data: Any, p: Path, expected_model: str | None = None) -> CalibrationResult:
+    """:func:`load_result` of a result file's content ``data`` (JSON as read), named ``p``."""
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise ResultFileError(f"{p} is not a {FORMAT} file (no 'format': '{FORMAT}')")
     if data.get("version") != VERSION:

@@ -264,7 +264,7 @@ def diagnose(
         if test_block is not None:
             reason += (
                 f"; test RMS {test_block['before']['rms_mm']:.4g} -> "
-                f"{test_block['after']['rms_mm']:.4g} mm (3D)"
+                f"{test_block['after']['rms_mm']:.4g} mm (3D) by the linearised fit"
             )
         return Diagnosis(
             **common,

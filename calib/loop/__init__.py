@@ -15,10 +15,12 @@ __all__, __getattr__, __dir__ = face(
             "parameter_entry",
             "EffectFileError",
             "effect_content",
+            "effect_block",
             "extended_model",
             "load_effect",
             "model_for_result",
         ),
+        "refit": ("fit_with_diagnosis", "with_result_content"),
         "fit": (
             "LoopFit",
             "fit_with_effect",

@@ -222,14 +222,21 @@ def load_effect(path: str, model: CalibrationModel, allow_empty: bool = False) -
         data = json.loads(p.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise EffectFileError(f"{p} is not a diagnosis file (JSON, UTF-8): {exc}") from None
+    return effect_block(data, model, str(p), allow_empty)
+
+
+def effect_block(
+    data: Any, model: CalibrationModel, where: str, allow_empty: bool = False
+) -> dict[str, Any]:
+    """:func:`load_effect` of a diagnosis file's content ``data`` (``where``: its name)."""
     block = data.get("effect") if isinstance(data, dict) else None
     if not isinstance(block, dict):
         raise EffectFileError(
-            f"{p} has no 'effect' block: write it with `pkm-calib diagnose --out`"
+            f"{where} has no 'effect' block: write it with `pkm-calib diagnose --out`"
         )
     if block.get("model") != model.nominal.name:
         raise EffectFileError(
-            f"{p} diagnosed model '{block.get('model')}', not '{model.nominal.name}'"
+            f"{where} diagnosed model '{block.get('model')}', not '{model.nominal.name}'"
         )
     named = str(block.get("named", "none"))
     if allow_empty and not block.get("added_parameters"):
@@ -243,5 +250,5 @@ def load_effect(path: str, model: CalibrationModel, allow_empty: bool = False) -
             if other
             else f"it named no effect ({named}): there is nothing to add"
         )
-        raise EffectFileError(f"{p}: {why}")
+        raise EffectFileError(f"{where}: {why}")
     return block
