@@ -1,7 +1,7 @@
 """Figures of an identifiability analysis: the spectrum of the column-scaled H and what the
-plan cannot see, by part of the machine. Sized for a view of about 700 x 450 pixels (a
-recording's figure view, a report's column): 6.4 x 4 inches at scenarios.figures.DPI, text of
-10-11 points."""
+plan cannot see, by part of the machine. Sized for a view of about 550 x 500 pixels (one of
+the recording's two figure views under the machine): about 5 x 4.6 inches at
+scenarios.figures.DPI, text of 10-11 points."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def spectrum_png(path: Path, h: np.ndarray, title: str) -> tuple[Path, int]:
     hs = scaled_jacobian(h)[0]
     s = np.linalg.svd(hs, compute_uv=False)
     rank = int(np.sum(s > RANK_RTOL * s[0]))
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig, ax = plt.subplots(figsize=(5.2, 4.6))
     k = np.arange(1, len(s) + 1)
     ax.semilogy(k[:rank], s[:rank], "o", ms=4, label=f"kept ({rank})")
     zero = int(np.sum(s[rank:] < 1e-18))
@@ -37,7 +37,7 @@ def spectrum_png(path: Path, h: np.ndarray, title: str) -> tuple[Path, int]:
         np.maximum(s[rank:], 1e-18),
         "x",
         ms=5,
-        label=f"null ({len(s) - rank}; {zero} exactly 0, drawn at 1e-18)",
+        label=f"null ({len(s) - rank}; {zero} exactly 0,\ndrawn at 1e-18)",
     )
     ax.axhline(RANK_RTOL * s[0], color="grey", lw=1.0, ls="--", label="rank threshold")
     ax.set_xlabel("index", fontsize=11)
@@ -55,7 +55,7 @@ def null_space_png(path: Path, seen: NullSpace, names: list[str]) -> Path:
     effect on any target; the counts on the bars, the totals in the title."""
     rows = seen.rows(names)
     labels = list(rows)
-    fig, ax = plt.subplots(figsize=(6.4, 2.2 + 0.5 * len(labels)), layout="constrained")
+    fig, ax = plt.subplots(figsize=(5.4, 2.4 + 0.5 * len(labels)), layout="constrained")
     y = np.arange(len(labels))
     left = np.zeros(len(labels))
     for key, (text, colour) in CATEGORIES.items():
@@ -68,7 +68,7 @@ def null_space_png(path: Path, seen: NullSpace, names: list[str]) -> Path:
         left += width
     ax.set_yticks(y, [_row_label(r) for r in labels], fontsize=10)
     ax.invert_yaxis()
-    ax.set_xlabel("parameters (a mixed group of k counts k: read + unseen)", fontsize=10)
+    ax.set_xlabel("parameters (k mixed ones: read + unseen = k)", fontsize=10)
     ax.tick_params(axis="x", labelsize=10)
     unseen = sum(g.unseen for g in seen.mixed) + len(seen.no_effect)
     ax.set_title(

@@ -109,17 +109,19 @@ def null_space_sentence(n: dict[str, Any]) -> str:
 
 
 def groups_markdown(n: dict[str, Any]) -> str:
-    """The sentence of :func:`null_space_sentence` and a table of the mixed groups."""
+    """The sentence of :func:`null_space_sentence` and the mixed groups, one bullet each (a
+    list wraps in a narrow view, where a table's row of 23 names runs off it)."""
     rows = [
-        f"| {' '.join(g['members'])} | {len(g['members'])} | {g['read']} | {g['unseen']} |"
+        f"* {len(g['members'])} read as {g['read']}, {g['unseen']} unseen: "
+        + ", ".join(g["members"])
         for g in n["groups"]
     ]
     return "\n".join(
         [
             null_space_sentence(n),
             "",
-            "| source errors read only together | count | combinations read | unseen |",
-            "|---|---|---|---|",
+            "Source errors read only together (count read as combinations, directions unseen):",
+            "",
             *rows,
         ]
     )

@@ -154,7 +154,7 @@ def run(
     _, rank_fig = spectrum_png(
         out_dir / "singular_values.png",
         h_twin,
-        f"polisher, {len(poses)} poses: column-scaled H of the {len(params)} source errors",
+        f"polisher, {len(poses)} poses:\ncolumn-scaled H of the {len(params)} source errors",
     )
     seen = null_space(h_twin, list(params.names))
     null_space_png(out_dir / "null_space.png", seen, list(params.names))
