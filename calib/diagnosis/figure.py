@@ -14,7 +14,7 @@ def save_diagnosis_png(diag, path: str | Path) -> Path:
     before and (for a named effect) after the correction; above it, for an actuator effect,
     the actuator's offset seen in each pose's readings against the fitted one (the shape of
     the effect itself). Lengths in mm, angles in deg (calib.diagnosis.plot); text of 10-11
-    points on 6.4 inches, to be read in a view of about 600 pixels. Written atomically."""
+    points on 6.4 x 4.2-5 inches, to be read in a view of about 700 x 420 pixels. Written atomically."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -26,7 +26,9 @@ def save_diagnosis_png(diag, path: str | Path) -> Path:
     if partial is None:
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
     else:
-        fig, (top, ax) = plt.subplots(2, 1, figsize=(6.4, 6.4), sharex=True)
+        fig, (top, ax) = plt.subplots(
+            2, 1, figsize=(6.4, 5.0), sharex=True, gridspec_kw={"height_ratios": [1, 1.4]}
+        )
         order = np.argsort(x)
         top.plot(x, partial["seen"], "o", ms=4, color="#4c78a8", label="seen in the readings")
         top.plot(
