@@ -83,7 +83,8 @@ def confusion_png(path: Path, confusion: dict[str, dict[str, int]]) -> Path:
     n = len(rows)
     right = int(np.trace(counts[:, :n])) if n else 0
     fig, ax = plt.subplots(
-        figsize=(2.6 + 0.5 * len(columns), 2.6 + 0.36 * n + 0.2 * len(notes)),
+        # landscape, about the shape of the recording's view (two side by side over the report)
+        figsize=(3.4 + 0.62 * len(columns), 2.4 + 0.26 * n + 0.2 * len(notes)),
         layout="constrained",
     )
     im = ax.imshow(counts, cmap="viridis", aspect="auto")
@@ -102,8 +103,8 @@ def confusion_png(path: Path, confusion: dict[str, dict[str, int]]) -> Path:
             )
     if len(columns) > n:  # the names of no class, apart
         ax.axvline(n - 0.5, color="w", lw=3)
-    ax.set_xticks(np.arange(len(columns)), columns, rotation=40, ha="right", fontsize=9)
-    ax.set_yticks(np.arange(n), rows, fontsize=9)
+    ax.set_xticks(np.arange(len(columns)), columns, rotation=30, ha="right", fontsize=10)
+    ax.set_yticks(np.arange(n), rows, fontsize=10)
     ax.set_xlabel("\n".join(["named by the diagnosis", *notes]), fontsize=10)
     ax.set_ylabel("effect in the truth", fontsize=10)
     ax.set_title(
