@@ -14,7 +14,8 @@ def save_diagnosis_png(diag, path: str | Path) -> Path:
     before and (for a named effect) after the correction; above it, for an actuator effect,
     the actuator's offset seen in each pose's readings against the fitted one (the shape of
     the effect itself). Lengths in mm, angles in deg (calib.diagnosis.plot); text of 10-11
-    points on 6.4 x 4.2-5 inches, to be read in a view of about 700 x 420 pixels. Written atomically."""
+    points on 6.4 x 4.2-5 inches, to be read in a view of about 700 x 420 pixels. Written
+    atomically."""
     import matplotlib
 
     matplotlib.use("Agg")
