@@ -72,7 +72,8 @@ def effect_variable(
     command = np.asarray(commands, dtype=float)[:, a]
     if cand.explains == "command modulo pitch":
         pitch = float(np.asarray(coefficients)[-1])
-        return f"{name} command modulo {pitch * factor:.3g} {unit}", np.mod(command, pitch) * factor
+        label = f"{name} command modulo {pitch * factor:.3g} {unit} ({unit})"
+        return label, np.mod(command, pitch) * factor
     if cand.explains == "approach direction":
         ranked = np.argsort(order, kind="stable")
         step = np.zeros(len(command))
@@ -111,15 +112,16 @@ def effect_png(plot: EffectPlot, noise_mm: float, others: list[str]) -> bytes:
     """The figure of one named effect: residual per pose without and with it."""
     from scenarios.figures import plt, png_bytes
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
     besides = f" ({', '.join(others)} applied)" if others else ""
     ax.plot(plot.x, plot.without_mm, "o", ms=4, label=f"without {plot.effect}{besides}")
     ax.plot(plot.x, plot.with_mm, "s", ms=4, label="with every named effect")
     ax.axhline(noise_mm, color="k", lw=0.8, ls="--", label="noise per coordinate")
-    ax.set_xlabel(plot.variable)
-    ax.set_ylabel("residual per pose, RMS per coordinate (mm)")
-    ax.set_title(f"{plot.effect}: the residual against {plot.variable}", fontsize=9)
-    ax.legend(fontsize=8)
+    ax.set_xlabel(plot.variable, fontsize=11)
+    ax.set_ylabel("residual per pose, RMS\nper coordinate (mm)", fontsize=11)
+    ax.tick_params(labelsize=10)
+    ax.set_title(f"{plot.effect}: the residual against {plot.variable}", fontsize=11)
+    ax.legend(fontsize=10)
     fig.tight_layout()
     return png_bytes(fig)
 
@@ -132,14 +134,15 @@ def heldout_png(ratio: dict[str, float], chosen: str) -> bytes:
     names = list(ratio)
     values = np.array([ratio[n] for n in names], dtype=float)
     named = set(chosen.split("+"))
-    fig, ax = plt.subplots(figsize=(7, 0.8 + 0.32 * len(names)))
+    fig, ax = plt.subplots(figsize=(6.4, 1.2 + 0.34 * len(names)))
     colours = ["#e45756" if n in named else "#4c78a8" for n in names]
     y = np.arange(len(names))[::-1]
     ax.barh(y, np.where(np.isfinite(values), values, np.nan), color=colours)
-    ax.set_yticks(y, names, fontsize=8)
+    ax.set_yticks(y, names, fontsize=10)
     ax.set_xscale("log")
     ax.axvline(1.0, color="k", lw=0.8, ls="--")
-    ax.set_xlabel("held-out RMS / noise per coordinate (log; 1 = the noise)")
-    ax.set_title(f"candidates held out; named: {chosen}", fontsize=9)
+    ax.set_xlabel("held-out RMS / noise per coordinate (log; 1 = the noise)", fontsize=10)
+    ax.tick_params(axis="x", labelsize=10)
+    ax.set_title(f"candidates held out; named: {chosen}", fontsize=11)
     fig.tight_layout()
     return png_bytes(fig)

@@ -94,3 +94,48 @@ def test_tracker_scale_error_hides_in_the_geometry(setup):
     d = _diagnose(setup, [], scale_error=2e-5)  # 20 ppm: 24 um at 1.2 m
     assert not d.excess and d.chosen == "none"
     assert "tracker_scale" in d.scores
+
+
+def test_figure_variables_are_in_mm_and_deg(setup):
+    """The figure's axes in the units of files: the lead error's variable is the command
+    modulo the pitch found, in mm (0 .. 5 mm, not 0 .. 0.005 m), and the offset seen along
+    it in mm (the 6 um amplitude: 0.006 mm)."""
+    d = _diagnose(setup, [LeadError(amplitude_m=6e-6, pitch_m=5e-3)])
+    assert d.chosen == "lead_error"
+    plot = d.plot
+    pitch_mm = d.effect_parameters["lead_error"]["pitch"]["value"]
+    assert plot["variable"].endswith(f"command modulo pitch (mm; pitch found {pitch_mm:.4g} mm)")
+    x = np.asarray(plot["x"])
+    assert 0.0 <= x.min() and x.max() < pitch_mm and x.max() > 0.5 * pitch_mm
+    partial = plot["partial"]
+    assert partial["label"].endswith("offset (mm)")
+    # the unit, not the estimate: the fitted amplitude is the truth's 6 um = 0.006 mm within
+    # the fit's spread (5 um noise over 80 poses: about 1 um, here 0.75 um); in um or m it
+    # would be 1000 times off either way
+    assert 0.5 * 6e-3 < np.max(np.abs(partial["fitted"])) < 2 * 6e-3
+
+
+def test_pose_variables_are_named_with_their_unit():
+    """Each group of pose variables (calib.diagnosis.unexplained.features) in mm or deg, named
+    by its quantity: no "tool position [1]" or "(SI)"."""
+    from types import SimpleNamespace
+
+    from calib.diagnosis.plot import pose_variable
+
+    ctx = SimpleNamespace(
+        is_slide=np.array([True, False]), actuator_names=["L1", "J2"], time_unit="s"
+    )
+    si = np.array([0.001, -0.25])
+    cases = {
+        ("tool position", 1): ("tool y (mm)", si * 1e3),
+        ("tool orientation", 2): ("tool rotation about z (deg)", np.degrees(si)),
+        ("actuator commands", 0): ("L1 command (mm)", si * 1e3),
+        ("actuator commands", 1): ("J2 command (deg)", np.degrees(si)),
+        ("measurement order", 0): ("time (s)", si),
+    }
+    for (group, i), (label, values) in cases.items():
+        got_label, got = pose_variable(ctx, group, i, si)
+        assert got_label == label
+        np.testing.assert_allclose(got, values, rtol=1e-15)
+    with pytest.raises(ValueError, match="no pose variable group 'elbow'"):
+        pose_variable(ctx, "elbow", 0, si)

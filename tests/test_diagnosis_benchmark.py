@@ -211,6 +211,12 @@ def test_summary_contract(run):
             # scale of the amplitude (the inverse for the kinds sized by a time constant)
             assert c["effect_rms_over_sigma"] == pytest.approx(c["multiplier"], rel=0.05)
     assert sum(s["confusion"]["none"].values()) == len(NONE_SEEDS)
+    # the figure's diagonal is the cases scored right, its rows named as its columns
+    from scenarios.studies.diagnosis_benchmark.figures import confusion_matrix
+
+    rows, columns, counts, _ = confusion_matrix(s["confusion"])
+    assert columns[: len(rows)] == rows
+    assert np.trace(counts[:, : len(rows)]) == sum(bool(c["correct"]) for c in s["cases"])
     # the figures, in the report and in the recording, whose every view has data
     assert set(s["figures"]) == {"confusion", "rate_by_size"}
     report = (out_dir / "report.md").read_text()
@@ -259,9 +265,44 @@ def test_confusion_heat_map_counts(tmp_path):
             tmp_path / "c.png",
             {"backlash": {"backlash": 3, "none": 1}, "none": {"none": 5, "gain_error": 2}},
         )
-    # rows: backlash, none; columns: backlash, gain_error, none
-    np.testing.assert_array_equal(captured["data"], [[3, 0, 1], [0, 2, 5]])
+    # rows and columns alike, in ACCEPTED's order, none last: gain_error, backlash, none
+    np.testing.assert_array_equal(captured["data"], [[0, 0, 0], [0, 3, 1], [2, 0, 5]])
     assert (tmp_path / "c.png").stat().st_size > 0
+
+
+def test_confusion_rows_and_columns_share_names_and_the_diagonal_is_right():
+    """Rows and the square part of the columns carry the same names in the same order; a
+    name ACCEPTED counts as right lands on the diagonal (zero_drift for a warm-up, two
+    thermal names at once, "none" for the air temperature), every other name off it."""
+    from scenarios.studies.diagnosis_benchmark.figures import confusion_matrix
+
+    confusion = {
+        "thermal_warmup": {"zero_drift": 2, "thermal_growth+zero_drift": 1, "none": 4},
+        "joint_backlash": {"backlash": 3, "backlash+gain_error": 1},
+        "backlash": {"backlash": 2, "refused: ValueError": 1},
+        "tracker_air_temperature": {"none": 2, "tracker_scale": 1},
+        "reflector_offset": {"unexplained: correlated with tool position": 2},
+        "none": {"none": 5, "gain_error": 1},
+    }
+    rows, columns, counts, notes = confusion_matrix(confusion)
+    n = len(rows)
+    assert columns[:n] == rows
+    assert rows == [
+        "thermal_growth (+2 alike)",
+        "gain_error",
+        "reflector_offsets",
+        "backlash",
+        "tracker_scale",
+        "none",
+    ]
+    assert columns[n:] == ["refused", "several effects", "unexplained"]
+    assert notes == ["thermal_growth (+2 alike): thermal_growth, zero_drift, thermal_expansion"]
+    right = sum(c for k, row in confusion.items() for m, c in row.items() if is_correct(k, m))
+    assert np.trace(counts[:, :n]) == right == 16
+    assert counts.sum() == sum(sum(row.values()) for row in confusion.values())
+    # the two backlash kinds share one row; the warm-up's "none" is off the diagonal
+    assert counts[rows.index("backlash"), rows.index("backlash")] == 5
+    assert counts[0, rows.index("none")] == 4
 
 
 def figures_module():

@@ -241,7 +241,9 @@ def test_the_regime_tables_give_the_maximum_and_one_sign(regime_summary):
     """The test maximum beside the mean (the paper's Liu gain was in the maximum; a mean that
     wins can come with a maximum that loses), and the heat maps' numbers are the tables'
     (estimator minus OLS, below 0 better)."""
-    from scenarios.studies.liu_regime.figures import minus_ols_grid
+    import numpy as np
+
+    from scenarios.studies.liu_regime.figures import cell_text, minus_ols_grid
 
     cell = regime_summary["cells"]["interpolated/0.05"]
     cell["ols_test_pos_max_um"] = {"median": 97.0}
@@ -257,7 +259,10 @@ def test_the_regime_tables_give_the_maximum_and_one_sign(regime_summary):
     assert "(the paper's Liu: -14.3% in the mean, -39.1% in the maximum)" in text
     regime_summary.update(placements=["interpolated"], sigmas_mm=[0.005, 0.05])
     diff, better = minus_ols_grid(regime_summary, "liu_paper_deg")
-    assert diff.tolist() == [[0.07, -2.0]] and better.tolist() == [[0.15, 0.95]]
+    # noise down, placements across, in mm (every figure's unit)
+    np.testing.assert_allclose(diff, [[0.07e-3], [-2.0e-3]], rtol=1e-12)
+    assert better.tolist() == [[0.15], [0.95]]
+    assert cell_text(-2.0e-3, 0.95) == "-0.0020\n95% better"
 
 
 def test_the_bias_sentence_follows_the_noise_free_cells(regime_summary):

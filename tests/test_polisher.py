@@ -189,3 +189,65 @@ def test_collinear_nodes_lose_structural_errors(polisher, params):
     report = analyse(h, params.names)
     assert report.rank == 29 < 51
     assert len(report.unidentifiable) == len(params) - 29
+
+
+def test_null_space_groups_of_a_known_matrix():
+    """Columns c0, c1, c0 again, zero, c0 + c1, c2: c0, its copy and c0 + c1 and c1 are coupled
+    (2 directions unseen among 4, 2 combinations read), c2 alone, the zero column no effect;
+    the rank 3 = 1 alone + 2 read."""
+    from scenarios.studies.polisher_identifiability.null_space import null_space
+
+    rng = np.random.default_rng(0)
+    c = rng.normal(size=(12, 3))
+    h = np.column_stack([c[:, 0], c[:, 1], c[:, 0], np.zeros(12), c[:, 0] + c[:, 1], c[:, 2]])
+    names = ["a.x", "a.y", "b.x", "b.y", "b.z", "c.x"]
+    seen = null_space(h, names)
+    assert seen.rank == 3
+    assert seen.no_effect == ("b.y",) and seen.alone == ("c.x",)
+    (group,) = seen.mixed
+    assert set(group.members) == {"a.x", "a.y", "b.x", "b.z"}
+    assert (group.unseen, group.read) == (2, 2)
+    assert seen.share[3] == pytest.approx(1.0) and seen.share[5] == pytest.approx(0.0, abs=1e-12)
+    rows = seen.rows(names)
+    assert rows["a + b"] == {"alone": 0, "read": 2, "unseen": 2, "no_effect": 0}
+    assert rows["b"]["no_effect"] == 1 and rows["c"]["alone"] == 1
+    n = seen.summary(names)
+    assert n["alone"] + n["read_in_combinations"] == n["rank"]
+    assert n["no_effect"] + n["unseen_in_combinations"] == len(names) - n["rank"]
+
+
+def test_null_space_of_the_fine_plan_adds_up(polisher, params, fine_plan):
+    """On the paper's plan: one by one + combinations read = the rank of the reconstructions
+    (51); no effect = the zero columns analyse names; every parameter in one row."""
+    from scenarios.studies.polisher_identifiability.null_space import COUPLED, null_space
+    from scenarios.studies.polisher_identifiability.report import null_space_sentence
+
+    model = CalibrationModel(polisher, params)
+    x0 = np.zeros(len(params))
+    h = model.jacobian(x0, model.predict(x0, fine_plan[1]))
+    seen = null_space(h, list(params.names))
+    n = seen.summary(list(params.names))
+    rank = spectral_reconstruction(h).rank
+    assert n["rank"] == rank == n["alone"] + n["read_in_combinations"]
+    no_effect = [
+        k for k, why in analyse(h, list(params.names)).unidentifiable.items() if "no effect" in why
+    ]
+    assert sorted(seen.no_effect) == sorted(no_effect)
+    assert sum(sum(r.values()) for r in n["by_part"].values()) == len(params)
+    # the projector's blocks are projectors: their traces (the unseen counts) are integers,
+    # so no coupling above COUPLED was cut and none below it joined two groups
+    from calib.analysis import scaled_jacobian
+
+    vt = np.linalg.svd(scaled_jacobian(h)[0])[2]
+    p = vt[rank:].T @ vt[rank:]
+    index = {name: i for i, name in enumerate(params.names)}
+    for g in seen.mixed:
+        k = [index[m] for m in g.members]
+        assert np.trace(p[np.ix_(k, k)]) == pytest.approx(g.unseen, abs=1e-9)
+        rest = np.setdiff1d(np.arange(len(params)), k)
+        assert np.max(np.abs(p[np.ix_(k, rest)])) < COUPLED
+    text = null_space_sentence(n)
+    assert f"{n['no_effect']} move no target" in text and f"The rank, {rank}," in text
+    other = {**n, "no_effect": 7, "rank": 12}
+    assert "7 move no target" in null_space_sentence(other)
+    assert "The rank, 12," in null_space_sentence(other)

@@ -318,7 +318,15 @@ def test_scenario_recordings_show_data_in_every_face(tmp_path, name):
         assert "/world/three_reflectors/bodies/link6" in rb.entities
     elif name == "polisher_identifiability":  # the singular values on a log axis, static
         assert "singular values of H" in names
+        # what the plan cannot see, as counts per limb and the coupled groups named
+        assert "what the plan cannot see" in names and "read only as combinations" in names
         assert Readback(out / f"{name}.rrd").times.keys() == {"node"}
+    elif name == "measured_loop":  # two figures side by side, not three
+        figures = {v["name"] for v in views if v["kind"] == "2D"}
+        assert figures == {
+            "diagnose: the residual against what explains it",
+            "verify: the test set at each step",
+        }
 
 
 def test_recording_faces_cover_every_study():

@@ -1,5 +1,14 @@
 """The diagnosis benchmark's figures: the confusion matrix as a heat map (true effect x named
-effect, counts) and the rate of right names by effect size (multiples of the tracker noise)."""
+effect, counts) and the rate of right names by effect size (multiples of the tracker noise).
+
+The confusion matrix names its rows and columns alike, so that its diagonal holds the right
+names: each class is the set of diagnosis names :data:`ACCEPTED` counts as right for a twin
+kind ("none" aside where others are right too), named by its first name; a row is the class
+of the case's true kind, a column the class of the name the diagnosis gave (a name
+``is_correct`` accepts: the row's class). Names that belong to no class (a kernel's
+"unexplained: ...", two effects of different classes, a refused case) get columns of their
+own after the square part.
+"""
 
 from __future__ import annotations
 
@@ -9,17 +18,75 @@ from typing import Any
 import numpy as np
 
 from scenarios.figures import plt, save_png
+from scenarios.studies.diagnosis_benchmark.kinds import ACCEPTED, is_correct
 
 CONFUSION = "confusion.png"
 RATE = "rate_by_size.png"
 
 
+def kind_class(kind: str) -> tuple[str, ...]:
+    """The diagnosis names right for twin ``kind`` ("none" only where nothing else is)."""
+    names = tuple(n for n in ACCEPTED[kind] if n != "none")
+    return names or ("none",)
+
+
+def classes() -> list[tuple[str, ...]]:
+    """Every kind's class, in :data:`ACCEPTED`'s order, "none" last."""
+    out = list(dict.fromkeys(kind_class(k) for k in ACCEPTED))
+    return [c for c in out if c != ("none",)] + [("none",)]
+
+
+def name_class(named: str) -> tuple[str, ...] | str:
+    """The class every effect of ``named`` ("a+b": two) belongs to, or the column of its
+    own: "unexplained", "refused", "several effects", or the name itself."""
+    for prefix in ("unexplained", "refused"):
+        if named.startswith(prefix):
+            return prefix
+    found = {c for p in named.split("+") for c in classes() if p in c}
+    if len(found) == 1 and all(any(p in c for c in found) for p in named.split("+")):
+        return found.pop()
+    return "several effects" if "+" in named else named
+
+
+def class_label(c: tuple[str, ...]) -> str:
+    """A class by its first name; "(+k alike)" when it holds more."""
+    return c[0] if len(c) == 1 else f"{c[0]} (+{len(c) - 1} alike)"
+
+
+def confusion_matrix(
+    confusion: dict[str, dict[str, int]],
+) -> tuple[list[str], list[str], np.ndarray, list[str]]:
+    """(row labels, column labels, counts (rows, columns), notes): the first len(rows)
+    columns are the rows' classes in the rows' order, so the diagonal is the right names;
+    notes name the classes of more than one name."""
+    cells: dict[tuple[Any, Any], int] = {}
+    for kind, row in confusion.items():
+        for named, count in row.items():
+            column = kind_class(kind) if is_correct(kind, named) else name_class(named)
+            key = (kind_class(kind), column)
+            cells[key] = cells.get(key, 0) + int(count)
+    used = {k for k, _ in cells} | {c for _, c in cells if isinstance(c, tuple)}
+    square = [c for c in classes() if c in used]
+    extra = sorted({c for _, c in cells if isinstance(c, str)})
+    columns: list[Any] = [*square, *extra]
+    counts = np.zeros((len(square), len(columns)))
+    for (r, c), n in cells.items():
+        counts[square.index(r), columns.index(c)] += n
+    notes = [f"{class_label(c)}: {', '.join(c)}" for c in square if len(c) > 1]
+    labels = [class_label(c) for c in square]
+    return labels, labels + extra, counts, notes
+
+
 def confusion_png(path: Path, confusion: dict[str, dict[str, int]]) -> Path:
-    """Counts of each named effect (columns) for each true kind (rows), annotated."""
-    kinds = sorted(confusion)
-    named = sorted({n for row in confusion.values() for n in row})
-    counts = np.array([[confusion[k].get(n, 0) for n in named] for k in kinds], dtype=float)
-    fig, ax = plt.subplots(figsize=(1.6 + 0.55 * len(named), 1.4 + 0.38 * len(kinds)))
+    """The counts of :func:`confusion_matrix`, annotated; the right names on the diagonal."""
+    rows, columns, counts, notes = confusion_matrix(confusion)
+    n = len(rows)
+    right = int(np.trace(counts[:, :n])) if n else 0
+    fig, ax = plt.subplots(
+        # landscape, about the shape of the recording's view (two side by side over the report)
+        figsize=(3.4 + 0.62 * len(columns), 2.4 + 0.26 * n + 0.2 * len(notes)),
+        layout="constrained",
+    )
     im = ax.imshow(counts, cmap="viridis", aspect="auto")
     top = counts.max() if counts.size else 0.0
     for (i, j), c in np.ndenumerate(counts):
@@ -30,16 +97,23 @@ def confusion_png(path: Path, confusion: dict[str, dict[str, int]]) -> Path:
                 f"{c:.0f}",
                 ha="center",
                 va="center",
-                fontsize=7,
+                fontsize=10,
                 color="k" if c > 0.6 * top else "w",
+                fontweight="bold" if i == j else "normal",
             )
-    ax.set_xticks(np.arange(len(named)), named, rotation=60, ha="right", fontsize=7)
-    ax.set_yticks(np.arange(len(kinds)), kinds, fontsize=7)
-    ax.set_xlabel("named by the diagnosis")
-    ax.set_ylabel("effect in the truth")
-    ax.set_title("diagnosis benchmark: cases by true and named effect", fontsize=9)
-    fig.colorbar(im, ax=ax, label="cases", shrink=0.8)
-    fig.tight_layout()
+    if len(columns) > n:  # the names of no class, apart
+        ax.axvline(n - 0.5, color="w", lw=3)
+    ax.set_xticks(np.arange(len(columns)), columns, rotation=30, ha="right", fontsize=10)
+    ax.set_yticks(np.arange(n), rows, fontsize=10)
+    ax.set_xlabel("\n".join(["named by the diagnosis", *notes]), fontsize=10)
+    ax.set_ylabel("effect in the truth", fontsize=10)
+    ax.set_title(
+        f"right names on the diagonal: {right} of {int(counts.sum())} cases\n"
+        "(every size, absorbed cases included)",
+        fontsize=11,
+    )
+    bar = fig.colorbar(im, ax=ax, shrink=0.8)
+    bar.set_label("cases", fontsize=10)
     return save_png(fig, path)
 
 

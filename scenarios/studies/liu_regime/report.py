@@ -16,7 +16,10 @@ from scenarios.studies.liu_vs_ols.sentences import (
 CLEAR = 0.9  # "wins clearly": better in at least this fraction of the draws
 
 
-SIGN = "estimator minus OLS (um; below 0: the estimator is better)"
+SIGN = (
+    "estimator minus OLS (below 0: the estimator is better; um in the tables and sentences, "
+    "mm in the heat maps, as in every figure)"
+)
 
 
 def _best(s: dict[str, Any]) -> tuple[str, str, float, float] | None:
@@ -215,7 +218,7 @@ def report(s: dict[str, Any]) -> str:
     figs = s.get("figures") or {}
     if figs:
         lines += [
-            "## Heat maps (colour and text: median estimator minus OLS in the test mean, um; "
+            "## Heat maps (colour and text: median estimator minus OLS in the test mean, mm; "
             "% of draws better)",
             "",
         ]

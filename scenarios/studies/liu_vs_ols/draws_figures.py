@@ -1,4 +1,5 @@
-"""The draw study's figure: (estimator - OLS) test-layer mean and max error over the draws."""
+"""The draw study's figure: (estimator - OLS) test-layer mean and max error over the draws,
+in mm (as every figure)."""
 
 from __future__ import annotations
 
@@ -18,17 +19,17 @@ def draws_figure(out_dir: Path, results: list[dict[str, Any]], labels: list[str]
         for lab in labels:
             diff = np.array([r["layers"]["test"][lab][q] for r in results]) - ols
             ax.hist(
-                diff * 1e3,
+                diff,
                 bins=25,
                 alpha=0.6,
-                label=f"{shown(lab)} (median {np.median(diff) * 1e3:.2g})",
+                label=f"{shown(lab)} (median {np.median(diff):+.4f})",
             )
         ax.axvline(0.0, color="k", lw=0.8)
-        ax.set_xlabel(f"estimator - OLS, test layer {what} position error (um)")
-        ax.set_ylabel("draws")
-        ax.legend(fontsize=7)
+        ax.set_xlabel(f"estimator - OLS, test layer {what} error (mm)", fontsize=10)
+        ax.set_ylabel("draws", fontsize=10)
+        ax.legend(fontsize=8)
     fig.suptitle(
-        f"polisher, {len(results)} truth draws: below 0 the estimator beats OLS", fontsize=9
+        f"polisher, {len(results)} truth draws: below 0 the estimator beats OLS", fontsize=11
     )
     fig.tight_layout()
     save_png(fig, out_dir / "draws_liu_minus_ols.png")

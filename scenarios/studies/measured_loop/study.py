@@ -167,13 +167,39 @@ def run(
             summary.update(_to_the_machine(scenario, common, with_result, arm, effects, out_dir))
     summary["runtime_s"] = time.perf_counter() - t0
     recorder.log_report("measured_loop", summary)
-    figures = {  # the commands' own figures, as a user gets them beside their files
-        "diagnosis": "diagnose: the residual against what explains it",
-        "verify": "verify: geometry only, test set",
-        "verify_with_effect": "verify: geometry and effect, test set",
-    }
-    for stem, title in figures.items():
-        png = out_dir / f"{stem}.png"
-        if png.is_file():
-            recorder.log_figure(stem, png, title)
+    # the diagnosis's own figure, as a user gets it beside diagnosis.json, and the test set
+    # at each step of the loop in one figure (verify's two figures, each with a histogram
+    # beside, stay beside their files)
+    if (out_dir / "diagnosis.png").is_file():
+        recorder.log_figure(
+            "diagnosis",
+            out_dir / "diagnosis.png",
+            "diagnose: the residual against what explains it",
+        )
+    png = _test_errors_figure(summary, out_dir)
+    if png is not None:
+        summary["figures"] = {"test_errors": png.name}
+        recorder.log_figure("test_errors", png, "verify: the test set at each step")
     return summary
+
+
+def _test_errors_figure(summary: dict[str, Any], out_dir: Path) -> Path | None:
+    """test_errors.png from verify's CSV files, the RMS of the legend from summary's."""
+    from scenarios.studies.measured_loop.figures import per_pose_mm, test_errors_png
+
+    plain, with_effect = out_dir / "verify.csv", out_dir / "verify_with_effect.csv"
+    if not plain.is_file():
+        return None
+    stages = {
+        "nominal": (per_pose_mm(plain, "before_mm"), summary["test"]["before"]["rms_mm"]),
+        "geometry": (
+            per_pose_mm(plain, "after_mm"),
+            summary["test"]["after"]["rms_mm"],
+        ),
+    }
+    after = (summary.get("with_effect") or {}).get("test", {}).get("after")
+    if with_effect.is_file() and after:
+        label = f"geometry + {summary['diagnosis']['named']}"
+        stages[label] = (per_pose_mm(with_effect, "after_mm"), after["rms_mm"])
+    accuracy = float(summary["sigma_mm"]) * float(np.sqrt(3.0))
+    return test_errors_png(out_dir / "test_errors.png", stages, accuracy)

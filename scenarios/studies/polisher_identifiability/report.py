@@ -34,7 +34,9 @@ def report(s: dict[str, Any]) -> str:
         f"Rank {s['rank_of_figure']} of {s['n_source_errors']}. Source errors mostly (share "
         f"> 0.5) in the null space: {len(s['mostly_in_null_space'])}.",
         "",
-        f"![share of each source error in the null space]({s['figures']['null_space']})",
+        f"![what the plan cannot see, by part of the machine]({s['figures']['null_space']})",
+        "",
+        *([groups_markdown(s["null_space"])] if "null_space" in s else []),
         "",
         "## Cross-checks",
         "",
@@ -89,3 +91,37 @@ def report(s: dict[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def null_space_sentence(n: dict[str, Any]) -> str:
+    """Why the plan cannot see what it cannot, in the counts of ``n`` (summary's null_space)."""
+    mixed = sum(len(g["members"]) for g in n["groups"])
+    return (
+        f"Of the {n['alone'] + mixed + n['no_effect']} source errors, {n['no_effect']} move no "
+        f"target at any pose of the plan (their columns of H are zero), and {mixed} fall in "
+        f"{len(n['groups'])} groups whose columns of H are linearly dependent: what one of "
+        f"them does to every reading, a combination of the others does too, so the plan reads "
+        f"only {n['read_in_combinations']} combinations of them and "
+        f"{n['unseen_in_combinations']} directions stay unseen. The rank, {n['rank']}, is the "
+        f"{n['alone']} errors identified one by one plus those "
+        f"{n['read_in_combinations']} combinations."
+    )
+
+
+def groups_markdown(n: dict[str, Any]) -> str:
+    """The sentence of :func:`null_space_sentence` and the mixed groups, one bullet each (a
+    list wraps in a narrow view, where a table's row of 23 names runs off it)."""
+    rows = [
+        f"* {len(g['members'])} read as {g['read']}, {g['unseen']} unseen: "
+        + ", ".join(g["members"])
+        for g in n["groups"]
+    ]
+    return "\n".join(
+        [
+            null_space_sentence(n),
+            "",
+            "Source errors read only together (count read as combinations, directions unseen):",
+            "",
+            *rows,
+        ]
+    )

@@ -148,21 +148,22 @@ def run(
     recorder.log_text("identifiable", "\n".join(f"* {n}" for n in kept_names), "identifiable set")
 
     from scenarios.studies.polisher_identifiability.figures import null_space_png, spectrum_png
+    from scenarios.studies.polisher_identifiability.null_space import null_space
+    from scenarios.studies.polisher_identifiability.report import groups_markdown
 
     _, rank_fig = spectrum_png(
         out_dir / "singular_values.png",
         h_twin,
-        f"polisher, {len(poses)} poses: column-scaled H of the {len(params)} source errors",
+        f"polisher, {len(poses)} poses:\ncolumn-scaled H of the {len(params)} source errors",
     )
-    _, in_null = null_space_png(
-        out_dir / "null_space.png",
-        h_twin,
-        list(params.names),
-        "which source errors the plan cannot see (share in the null space of H)",
-    )
+    seen = null_space(h_twin, list(params.names))
+    null_space_png(out_dir / "null_space.png", seen, list(params.names))
+    in_null = [params.names[i] for i in np.flatnonzero(seen.share > 0.5)]
+    null_summary = seen.summary(list(params.names))
     # the report's figures, static: the singular values on their log axis, where the rank is
     recorder.log_figure("singular_values", out_dir / "singular_values.png", "singular values of H")
     recorder.log_figure("null_space", out_dir / "null_space.png", "what the plan cannot see")
+    recorder.log_text("combinations", groups_markdown(null_summary), "read only as combinations")
     # a wrist angle or node outside the plan raises before this point (WorkspaceError)
     summary = {
         "scenario": scenario.name,
@@ -190,6 +191,7 @@ def run(
         "figures": {"singular_values": "singular_values.png", "null_space": "null_space.png"},
         "rank_of_figure": rank_fig,
         "mostly_in_null_space": in_null,
+        "null_space": null_summary,
         "runtime_s": time.perf_counter() - t0,
     }
     recorder.log_report(scenario.study, summary)
