@@ -366,3 +366,26 @@ def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
     assert len(compared) > len(bodies)  # the transforms and the targets' points and arrows
     for key in compared:
         assert a.rows[key] == b.rows[key], key
+
+
+def test_a_field_of_nodes_states_its_magnification_from_the_data(tmp_path):
+    """Errors of micrometres on nodes 0.1 m apart: the largest arrow drawn at most 80 % of the
+    spacing, a 1-2-5 factor (0.08 m / 40 um = 2000), named in the view and the legend."""
+    from scenarios.recording.targets import field_scale
+
+    mech = Mechanism.from_xml(HEXAPOD)
+    xy = np.stack(np.meshgrid([0.0, 0.1, 0.2], [0.0, 0.1]), axis=-1).reshape(-1, 2)
+    nominal = np.column_stack([xy, np.full(6, 0.3)])
+    measured = nominal + np.outer(np.linspace(10e-6, 40e-6, 6), [1.0, 0.0, 0.0])
+    scale = field_scale(nominal, measured)
+    assert scale == 2000.0 and 40e-6 * scale <= 0.8 * 0.1 < 40e-6 * 5000
+    qpos = np.repeat(mech.home_qpos[None], 6, axis=0)
+    with Recorder(tmp_path / "f.rrd", "field") as rec:
+        rec.send_blueprint()
+        rec.log_mechanism(mech)
+        rec.log_poses("node", range(6), mech, qpos, nominal, measured, "ols", scale, field=True)
+    names = [v["name"] for v in assert_every_face_has_data(tmp_path / "f.rrd")]
+    assert "ols: errors x2000" in names
+    entities = Readback(tmp_path / "f.rrd").entities
+    assert {"/world/targets/ols/field", "/world/targets/ols/legend"} <= set(entities)
+    assert "/world/targets/ols/error_mm/leader" in entities

@@ -150,8 +150,8 @@ def _machine_contents(machine: str) -> list[str]:
 
 
 def machine_views(rrb: Any, log: Logged) -> list[Any]:
-    """One 3D view per pose group (its machine, its targets and arrows), the camera on the
-    group's targets; a machine without targets gets a view of its own."""
+    """One 3D view per pose group (its machine, its targets, arrows and legend), the camera on
+    the group's targets; a machine without targets gets a view of its own."""
     views = []
     for part, group in log.target_groups.items():
         contents = [*_machine_contents(group.machine), f"world/targets/{part}/**"]
@@ -161,7 +161,7 @@ def machine_views(rrb: Any, log: Logged) -> list[Any]:
                 origin="world",
                 contents=contents,
                 name=group.name,
-                eye_controls=bounds.eye(rrb, distance=2.6),
+                eye_controls=bounds.eye(rrb, distance=2.2),
             )
         )
     shown = {g.machine for g in log.target_groups.values()}

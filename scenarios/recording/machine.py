@@ -13,15 +13,20 @@ from scenarios.recording.blueprints import TargetGroup
 from scenarios.recording.parts import _name, _xyzw, geom_shape
 from scenarios.recording.session import _active, entity_part
 from scenarios.recording.targets import (
+    ERROR_COLOUR,
+    LEADER_COLOUR,
+    MEASURED_COLOUR,
     arrow_scale,
     error_labels,
     label_positions,
+    legend,
     radii,
     spread,
+    target_colours,
 )
 from twin.mechanism import Mechanism
 
-NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
+FIELD_COLOUR = [235, 120, 120]  # every pose's arrow at once: lighter than the pose's own
 
 
 def _log_pose_set(
@@ -127,10 +132,12 @@ class MachineViews:
         group: str,
         scale: float | None = None,
         machine: str = "",
+        field: bool = False,
     ) -> None:
         """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3); the
         error arrows magnified ``scale`` times (None: the 1-2-5 factor that draws the largest
-        error as a fifth of the targets' spread, targets.arrow_scale).
+        error as at most 40 % of the targets' spread, targets.arrow_scale); ``field``: every
+        pose's arrow shown at once as well (a layer of nodes, one target each).
 
         The bodies' transforms and the targets of all poses go out as one column per entity
         (what :meth:`log_pose` and :meth:`log_targets` log pose by pose)."""
@@ -146,7 +153,7 @@ class MachineViews:
             )
         scale = arrow_scale(nominal, measured) if scale is None else float(scale)
         self._log_bodies_columns(timeline, indices, mech, qpos, machine)
-        self._log_targets(timeline, indices, nominal, measured, scale, group, machine)
+        self._log_targets(timeline, indices, nominal, measured, scale, group, machine, field)
 
     def _log_targets(
         self,
@@ -157,8 +164,12 @@ class MachineViews:
         scale: float,
         group: str,
         machine: str,
+        field: bool = False,
     ) -> None:
-        """The targets of every pose (P, T, 3) in one column per entity."""
+        """The targets of every pose (P, T, 3) in one column per entity: each target's nominal
+        point in its colour, the measured point at the tip of the error arrow (magnified
+        ``scale`` times), the error in mm on a label set off with a leader line, a legend;
+        ``field``: every pose's arrow shown at once too (static, thinner)."""
         rr = self.rr
         nominal = np.asarray(nominal, dtype=float).reshape(len(indices), -1, 3)
         measured = np.asarray(measured, dtype=float).reshape(nominal.shape)
@@ -166,6 +177,7 @@ class MachineViews:
         n_poses, n_targets = nominal.shape[:2]
         lengths = [n_targets] * n_poses
         flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
+        arrows = (flat_measured - flat_nominal) * scale
         span = spread(nominal)
         point_radius, arrow_radius = radii(span)
         labels_at = label_positions(nominal, span).reshape(-1, 3)
@@ -173,19 +185,19 @@ class MachineViews:
         part = entity_part(group)
         root = f"world/targets/{part}"
 
-        def points(positions: np.ndarray, colour: list[int], radius: float) -> list[Any]:
+        def points(positions: np.ndarray, colours: Any, radius: float) -> list[Any]:
             return [
-                *rr.Points3D.columns(positions=positions).partition(lengths),
-                *rr.Points3D.columns(radii=[radius] * n_poses, colors=[colour] * n_poses),
+                *rr.Points3D.columns(positions=positions, colors=colours).partition(lengths),
+                *rr.Points3D.columns(radii=[radius] * n_poses),
             ]
 
         columns = {
-            "nominal": points(flat_nominal, NOMINAL_COLOUR, point_radius),
-            "measured": points(flat_measured, MEASURED_COLOUR, point_radius),
+            "nominal": points(flat_nominal, target_colours(n_poses, n_targets), point_radius),
+            "measured_magnified": points(
+                flat_nominal + arrows, [MEASURED_COLOUR] * len(flat_nominal), point_radius / 2
+            ),
             "error": [
-                *rr.Arrows3D.columns(
-                    origins=flat_nominal, vectors=(flat_measured - flat_nominal) * scale
-                ).partition(lengths),
+                *rr.Arrows3D.columns(origins=flat_nominal, vectors=arrows).partition(lengths),
                 *rr.Arrows3D.columns(
                     radii=[arrow_radius] * n_poses, colors=[ERROR_COLOUR] * n_poses
                 ),
@@ -195,14 +207,34 @@ class MachineViews:
                     positions=labels_at, labels=error_labels(flat_nominal, flat_measured)
                 ).partition(lengths),
                 *rr.Points3D.columns(
-                    radii=[point_radius / 3] * n_poses,
+                    radii=[point_radius / 4] * n_poses,
                     colors=[ERROR_COLOUR] * n_poses,
                     show_labels=[True] * n_poses,
+                ),
+            ],
+            "error_mm/leader": [
+                *rr.LineStrips3D.columns(
+                    strips=np.stack([flat_nominal, labels_at], axis=1)
+                ).partition(lengths),
+                *rr.LineStrips3D.columns(
+                    radii=[arrow_radius / 4] * n_poses, colors=[LEADER_COLOUR] * n_poses
                 ),
             ],
         }
         for name, cols in columns.items():
             self._rec.send_columns(f"{root}/{name}", indexes=times, columns=cols)
+        if field:
+            self._rec.log(
+                f"{root}/field",
+                rr.Arrows3D(
+                    origins=flat_nominal,
+                    vectors=arrows,
+                    radii=arrow_radius / 2,
+                    colors=[FIELD_COLOUR],
+                ),
+                rr.Points3D(flat_nominal, radii=point_radius / 3, colors=[FIELD_COLOUR]),
+                static=True,
+            )
         self.logged.machine_bounds.add(flat_nominal)
         self.logged.poses.update(indices)
         entry = self.logged.target_groups.setdefault(
@@ -210,8 +242,15 @@ class MachineViews:
         )
         entry.bounds.add(flat_nominal)
         entry.bounds.add(labels_at)
+        entry.bounds.add(flat_nominal + arrows)
+        at, colours, texts = legend(entry.bounds.lo, entry.bounds.hi, n_targets, scale)
+        self._rec.log(
+            f"{root}/legend",
+            rr.Points3D(at, radii=point_radius, colors=colours, labels=texts, show_labels=True),
+            static=True,
+        )
+        entry.bounds.add(at)
 
-    @_active
     def _log_bodies_columns(
         self,
         timeline: str,
@@ -220,6 +259,7 @@ class MachineViews:
         qpos: np.ndarray,
         machine: str = "",
     ) -> None:
+        """The bodies' transforms at every pose, one column per body."""
         rr, m, d = self.rr, mech.model, mech.data
         self.logged.use_timeline(timeline)
         xpos = np.empty((len(qpos), m.nbody, 3))
