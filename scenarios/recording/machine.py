@@ -169,7 +169,7 @@ class MachineViews:
         """The targets of every pose (P, T, 3) in one column per entity: each target's nominal
         point in its colour, the measured point at the tip of the error arrow (magnified
         ``scale`` times), the error in mm on a label set off with a leader line, a legend;
-        ``field``: every pose's arrow shown at once too (static, thinner)."""
+        ``field``: every pose's arrow shown at once too (static, lighter)."""
         rr = self.rr
         nominal = np.asarray(nominal, dtype=float).reshape(len(indices), -1, 3)
         measured = np.asarray(measured, dtype=float).reshape(nominal.shape)
@@ -229,10 +229,10 @@ class MachineViews:
                 rr.Arrows3D(
                     origins=flat_nominal,
                     vectors=arrows,
-                    radii=arrow_radius / 2,
+                    radii=arrow_radius,
                     colors=[FIELD_COLOUR],
                 ),
-                rr.Points3D(flat_nominal, radii=point_radius / 3, colors=[FIELD_COLOUR]),
+                rr.Points3D(flat_nominal, radii=point_radius / 2, colors=[FIELD_COLOUR]),
                 static=True,
             )
         self.logged.machine_bounds.add(flat_nominal)

@@ -64,7 +64,8 @@ def target_colours(n_poses: int, n_targets: int) -> np.ndarray:
 
 
 def legend(bounds_lo: np.ndarray, bounds_hi: np.ndarray, n_targets: int, scale: float):
-    """A legend's points and texts, stacked down from above the box's corner (metres)."""
+    """A legend's points and texts, stacked down from above the box's corner (metres), a
+    line's height apart in a view framed on the box."""
     size = max(float(np.max(bounds_hi - bounds_lo)), 0.05)
     texts = [f"target {k + 1}, nominal" for k in range(min(n_targets, len(TARGET_COLOURS)))]
     if n_targets == 1:
@@ -72,7 +73,7 @@ def legend(bounds_lo: np.ndarray, bounds_hi: np.ndarray, n_targets: int, scale: 
     texts += [f"measured (error x{scale:g})", f"error x{scale:g}, size in mm"]
     colours = [*TARGET_COLOURS[: len(texts) - 2], MEASURED_COLOUR, ERROR_COLOUR]
     top = np.array([bounds_lo[0], bounds_lo[1], bounds_hi[2] + 0.1 * size])
-    at = np.array([top - [0.0, 0.0, 0.08 * size * k] for k in range(len(texts))])
+    at = np.array([top - [0.0, 0.0, 0.16 * size * k] for k in range(len(texts))])
     return at, colours, texts
 
 
