@@ -19,7 +19,6 @@ from scenarios.recording.targets import (
     arrow_scale,
     error_labels,
     label_positions,
-    legend,
     radii,
     spread,
     target_colours,
@@ -152,8 +151,8 @@ class MachineViews:
                 f"{nominal.shape} and {measured.shape}: one of each per pose"
             )
         scale = arrow_scale(nominal, measured) if scale is None else float(scale)
-        self._log_bodies_columns(timeline, indices, mech, qpos, machine)
-        self._log_targets(timeline, indices, nominal, measured, scale, group, machine, field)
+        head = self._log_bodies_columns(timeline, indices, mech, qpos, machine)
+        self._log_targets(timeline, indices, nominal, measured, scale, group, machine, field, head)
 
     def _log_targets(
         self,
@@ -165,11 +164,13 @@ class MachineViews:
         group: str,
         machine: str,
         field: bool = False,
+        head: np.ndarray | None = None,
     ) -> None:
         """The targets of every pose (P, T, 3) in one column per entity: each target's nominal
         point in its colour, the measured point at the tip of the error arrow (magnified
-        ``scale`` times), the error in mm on a label set off with a leader line, a legend;
-        ``field``: every pose's arrow shown at once too (static, lighter)."""
+        ``scale`` times), the error in mm on a label set off with a leader line; ``field``:
+        every pose's arrow shown at once too (static, lighter). The group's view is framed on
+        the targets, their arrows and labels and the points ``head`` (the tool's body)."""
         rr = self.rr
         nominal = np.asarray(nominal, dtype=float).reshape(len(indices), -1, 3)
         measured = np.asarray(measured, dtype=float).reshape(nominal.shape)
@@ -241,15 +242,11 @@ class MachineViews:
             part, TargetGroup(f"{group}: errors x{scale:g}", machine)
         )
         entry.bounds.add(flat_nominal)
+        entry.targets.add(flat_nominal)
         entry.bounds.add(labels_at)
         entry.bounds.add(flat_nominal + arrows)
-        at, colours, texts = legend(entry.bounds.lo, entry.bounds.hi, n_targets, scale)
-        self._rec.log(
-            f"{root}/legend",
-            rr.Points3D(at, radii=point_radius, colors=colours, labels=texts, show_labels=True),
-            static=True,
-        )
-        entry.bounds.add(at)
+        if head is not None:
+            entry.bounds.add(head)
 
     def _log_bodies_columns(
         self,
@@ -258,17 +255,32 @@ class MachineViews:
         mech: Mechanism,
         qpos: np.ndarray,
         machine: str = "",
-    ) -> None:
-        """The bodies' transforms at every pose, one column per body."""
+    ) -> np.ndarray:
+        """The bodies' transforms at every pose, one column per body; returns the corners of
+        the boxes around the tool body's shown geoms at the first pose (metres, (K, 3)): the
+        tool head as the view opens, which it frames with the targets (at the other poses
+        the head moves over the targets, whose box the view holds)."""
         rr, m, d = self.rr, mech.model, mech.data
         self.logged.use_timeline(timeline)
         xpos = np.empty((len(qpos), m.nbody, 3))
         xquat = np.empty((len(qpos), m.nbody, 4))
+        tool = [
+            g
+            for g in range(m.ngeom)
+            if m.geom_bodyid[g] == mech.tool_body and geom_shape(self.rr, m, g) is not None
+        ]
+        # each geom's box in its own frame (MuJoCo's geom_aabb: centre, half sides): corners
+        signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+        local = m.geom_aabb[tool, None, :3] + signs[None] * m.geom_aabb[tool, None, 3:]
+        head = []
         for i, q in enumerate(qpos):
             d.qpos[:] = q
             mujoco.mj_kinematics(m, d)
             self.logged.machine_bounds.add(d.xpos[1:])
             xpos[i], xquat[i] = d.xpos, d.xquat
+            rot = d.geom_xmat[tool].reshape(-1, 3, 3)
+            if i == 0:
+                head.append(d.geom_xpos[tool, None] + np.einsum("gij,gcj->gci", rot, local))
         xyzw = xquat[:, :, [1, 2, 3, 0]]
         times = [rr.TimeColumn(timeline, sequence=indices)]
         for b in range(1, m.nbody):
@@ -278,6 +290,7 @@ class MachineViews:
                 columns=rr.Transform3D.columns(translation=xpos[:, b], quaternion=xyzw[:, b]),
             )
         self.logged.poses.update(indices)
+        return head[0].reshape(-1, 3) if head else np.empty((0, 3))
 
     def log_pose_set(
         self,

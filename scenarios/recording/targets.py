@@ -1,6 +1,7 @@
 """What a recording shows of a pose's targets: each target's nominal point in its own colour,
 the error as an arrow magnified to be seen (the measured point at its tip), each error's size
-as a label set off from the targets with a leader line, and a legend.
+as a label set off from the targets with a leader line (the magnification is in the view's
+name: no text in the scene but the errors' sizes).
 
 Pure functions of the positions (metres), shared by the pose-by-pose and the column-wise
 logging of ``scenarios.recording.recorder``.
@@ -14,7 +15,7 @@ import numpy as np
 
 TARGET_RADIUS = 0.003  # metres, at least
 ARROW_SHARE = 0.4  # the largest arrow as a share of the targets' spread
-FIELD_SHARE = 0.8  # the largest arrow of a field of nodes as a share of their spacing
+FIELD_SHARE = 0.3  # the largest arrow of a field of nodes as a share of the field's extent
 LABEL_OFFSET = 0.15  # a label's distance from its target, as a share of the spread
 # each target's nominal point (1, 2, 3 ...): blue, green, purple, brown, teal; the measured
 # point orange and the error arrow red, so that none is taken for another
@@ -47,34 +48,18 @@ def arrow_scale(nominal: np.ndarray, measured: np.ndarray, length: float | None 
 
 
 def field_scale(nominal: np.ndarray, measured: np.ndarray) -> float:
-    """:func:`arrow_scale` for a field of nodes (N, 3) shown at once: the largest arrow at most
-    80 % of the smallest spacing between two nodes, so that no arrow reaches its neighbour."""
+    """:func:`arrow_scale` for a field of nodes (N, 3) shown at once, in a view framed on the
+    field: the largest arrow at most 30 % of the field's extent (between 12 % and 30 % after the
+    1-2-5 rounding), whatever the errors' size, so that every stage's view shows
+    arrows of the same length on the screen."""
     p = np.asarray(nominal, dtype=float).reshape(-1, 3)
-    gaps = np.linalg.norm(p[:, None] - p[None], axis=-1)
-    gaps = gaps[np.triu_indices(len(p), 1)]
-    gaps = gaps[gaps > 1e-9]
-    spacing = float(gaps.min()) if len(gaps) else spread(p)
-    return arrow_scale(p, measured, FIELD_SHARE * spacing)
+    return arrow_scale(p, measured, FIELD_SHARE * spread(p))
 
 
 def target_colours(n_poses: int, n_targets: int) -> np.ndarray:
     """Each target's colour (flat over poses and targets, (P * T, 3) uint8)."""
     palette = np.array(TARGET_COLOURS, dtype=np.uint8)
     return np.tile(palette[np.arange(n_targets) % len(palette)], (n_poses, 1))
-
-
-def legend(bounds_lo: np.ndarray, bounds_hi: np.ndarray, n_targets: int, scale: float):
-    """A legend's points and texts, stacked down from above the box's corner (metres), a
-    line's height apart in a view framed on the box."""
-    size = max(float(np.max(bounds_hi - bounds_lo)), 0.05)
-    texts = [f"target {k + 1}, nominal" for k in range(min(n_targets, len(TARGET_COLOURS)))]
-    if n_targets == 1:
-        texts = ["target, nominal"]
-    texts += [f"measured (error x{scale:g})", f"error x{scale:g}, size in mm"]
-    colours = [*TARGET_COLOURS[: len(texts) - 2], MEASURED_COLOUR, ERROR_COLOUR]
-    top = np.array([bounds_lo[0], bounds_lo[1], bounds_hi[2] + 0.1 * size])
-    at = np.array([top - [0.0, 0.0, 0.16 * size * k] for k in range(len(texts))])
-    return at, colours, texts
 
 
 def label_positions(nominal: np.ndarray, span: float) -> np.ndarray:
