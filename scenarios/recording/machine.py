@@ -13,6 +13,7 @@ from scenarios.recording.blueprints import TargetGroup
 from scenarios.recording.parts import _name, _xyzw, geom_shape
 from scenarios.recording.session import _active, entity_part
 from scenarios.recording.targets import (
+    ARROW_SHARE,
     ERROR_COLOUR,
     LEADER_COLOUR,
     MEASURED_COLOUR,
@@ -135,7 +136,8 @@ class MachineViews:
     ) -> None:
         """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3); the
         error arrows magnified ``scale`` times (None: the 1-2-5 factor that draws the largest
-        error as at most 40 % of the targets' spread, targets.arrow_scale); ``field``: every
+        error as at most 40 % of the targets' spread or of the tool head's size, whichever is
+        larger: a share of what the view frames, targets.arrow_scale); ``field``: every
         pose's arrow shown at once as well (a layer of nodes, one target each).
 
         The bodies' transforms and the targets of all poses go out as one column per entity
@@ -150,8 +152,10 @@ class MachineViews:
                 f"{group}: {len(indices)} indices, {len(qpos)} configurations, targets "
                 f"{nominal.shape} and {measured.shape}: one of each per pose"
             )
-        scale = arrow_scale(nominal, measured) if scale is None else float(scale)
         head = self._log_bodies_columns(timeline, indices, mech, qpos, machine)
+        if scale is None:  # a share of what the view frames: the targets or the head
+            extent = max(spread(nominal), spread(head, least=0.0))
+            scale = arrow_scale(nominal, measured, ARROW_SHARE * extent)
         self._log_targets(timeline, indices, nominal, measured, scale, group, machine, field, head)
 
     def _log_targets(
