@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 from recording_faces import CHECKED, Readback, assert_every_face_has_data, blueprint
 
-from scenarios.recording.blueprints import SecondTimeline
+from scenarios.recording.blueprints import (
+    CORNERS,
+    EYE_ABOVE,
+    FIT_MARGIN,
+    FOV_Y_DEG,
+    Bounds,
+    SecondTimeline,
+)
 from scenarios.recording.parts import error_colors
 from scenarios.recording.recorder import Recorder
 from scenarios.recording.targets import arrow_scale, label_positions
@@ -66,7 +73,7 @@ def test_expected_entities_exist(recorded):
         "/world/bodies/leg3_rod",
         "/world/bodies/world/base_plate",
         "/world/targets/cal/nominal",
-        "/world/targets/cal/measured",
+        "/world/targets/cal/measured_magnified",
         "/world/targets/cal/error",
         "/error_maps/before/layer_220/nodes",
         "/error_maps/before/layer_220/scale_mm",
@@ -374,3 +381,70 @@ def test_log_poses_sends_what_log_pose_logs(tmp_path, monkeypatch):
     assert len(compared) > len(bodies)  # the transforms and the targets' points and arrows
     for key in compared:
         assert a.rows[key] == b.rows[key], key
+
+
+def test_a_field_of_nodes_states_its_magnification_from_the_data(tmp_path):
+    """Errors of micrometres on nodes spread 0.2 m: the largest arrow drawn at most 30 % of
+    the field's extent, a 1-2-5 factor (0.06 m / 40 um = 1500 -> 1000), named in the view
+    (no legend in the scene); the view framed on the field and the tool head."""
+    from scenarios.recording.targets import field_scale
+
+    mech = Mechanism.from_xml(HEXAPOD)
+    xy = np.stack(np.meshgrid([0.0, 0.1, 0.2], [0.0, 0.1]), axis=-1).reshape(-1, 2)
+    nominal = np.column_stack([xy, np.full(6, 0.3)])
+    measured = nominal + np.outer(np.linspace(10e-6, 40e-6, 6), [1.0, 0.0, 0.0])
+    scale = field_scale(nominal, measured)
+    assert scale == 1000.0 and 40e-6 * scale <= 0.3 * 0.2 < 40e-6 * 2000
+    assert field_scale(nominal, nominal + 100 * (measured - nominal)) == 10.0  # 0.06 / 4 mm
+    qpos = np.repeat(mech.home_qpos[None], 6, axis=0)
+    with Recorder(tmp_path / "f.rrd", "field") as rec:
+        rec.send_blueprint()
+        rec.log_mechanism(mech)
+        rec.log_poses("node", range(6), mech, qpos, nominal, measured, "ols", scale, field=True)
+        group = rec.logged.target_groups["ols"]
+    names = [v["name"] for v in assert_every_face_has_data(tmp_path / "f.rrd")]
+    assert "ols: errors x1000" in names
+    entities = set(Readback(tmp_path / "f.rrd").entities)
+    assert {"/world/targets/ols/field", "/world/targets/ols/error_mm/leader"} <= entities
+    assert not any("legend" in e for e in entities)
+    # the targets lie flat (one height): the view looks from high above; its box holds the
+    # targets and the tool head at the first pose (the centres of the tool body's geoms)
+    assert group.direction == EYE_ABOVE
+    m, d = mech.model, mujoco.MjData(mech.model)
+    d.qpos[:] = qpos[0]
+    mujoco.mj_kinematics(m, d)
+    head = d.geom_xpos[m.geom_bodyid == mech.tool_body]
+    assert len(head) and np.all(group.bounds.lo <= head) and np.all(head <= group.bounds.hi)
+    assert np.all(group.bounds.lo <= nominal.min(axis=0))
+
+
+@pytest.mark.parametrize("aspect", [0.5, 1.0, 1.8])
+def test_a_machine_view_is_framed_to_fill_it(aspect):
+    """From 1 / FIT_MARGIN of the eye's distance every corner of the box is inside the field of
+    view (vertical FOV_Y_DEG, horizontal from the aspect) and one on its edge: the tightest
+    fit; from the eye itself all are inside."""
+    import rerun.blueprint as rrb
+
+    box = Bounds()
+    box.add(np.array([[-0.3, -0.2, 0.0], [0.2, 0.3, 0.7]]))
+    eye = box.fit(rrb, aspect, EYE_ABOVE)
+    position = np.asarray(eye.position.as_arrow_array().to_pylist()[0])
+    target = np.asarray(eye.look_target.as_arrow_array().to_pylist()[0])
+    assert np.allclose(target, (box.lo + box.hi) / 2)
+    corners = np.array([[(box.lo, box.hi)[k][i] for i, k in enumerate(c)] for c in CORNERS])
+
+    def used(eye_at: np.ndarray) -> np.ndarray:
+        """Each corner's offset from the view's centre over the half-view (1: on the edge)."""
+        forward = (target - eye_at) / np.linalg.norm(target - eye_at)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, forward)
+        rel = corners - eye_at
+        tan_y = np.tan(np.radians(FOV_Y_DEG) / 2)
+        edge = np.maximum(np.abs(rel @ up) / tan_y, np.abs(rel @ right) / (aspect * tan_y))
+        return edge / (rel @ forward)
+
+    tight = used(target + (position - target) / FIT_MARGIN)
+    # 1e-6: the eye is stored in float32 (a relative rounding of 6e-8 per coordinate)
+    assert np.all(tight <= 1 + 1e-6) and np.max(tight) > 1 - 1e-6
+    assert np.all(used(position) < 1)

@@ -12,10 +12,19 @@ numbers, one parameter table per stage). A view is made only for data that exist
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+FIT_MARGIN = 1.1  # a machine view's eye this much farther than the tightest fit: a rim
+FOV_Y_DEG = 55.0  # the viewer's vertical field of view in a 3D view (its default)
+EYE_DIRECTION = (1.0, -1.3, 1.0)  # from a view's centre to its eye: from the front, above
+EYE_ABOVE, FLAT_SHARE = (1.0, -1.3, 2.6), 0.25  # a flat layer of targets: from higher up
+WINDOW, TITLE_BAR = (1600, 940), 25  # pixels: a viewer window's views (the layout's whole) and
+# a view's title bar; the machine views' cameras are framed for views of that share of it
+CORNERS = [(i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1)]
 
 
 @dataclass
@@ -41,12 +50,41 @@ class Bounds:
         if self.empty:
             return None
         centre = (self.lo + self.hi) / 2
-        size = max(float(np.max(self.hi - self.lo)), 0.05)
         d = np.asarray(direction, dtype=float)
-        position = centre + distance * size * d / np.linalg.norm(d)
+        position = centre + distance * self.size * d / np.linalg.norm(d)
         return rr_blueprint.EyeControls3D(
             position=position.tolist(), look_target=centre.tolist(), eye_up=[0.0, 0.0, 1.0]
         )
+
+    def fit(self, rr_blueprint: Any, aspect: float = 1.0, direction=EYE_DIRECTION) -> Any:
+        """Camera looking at the box centre along ``direction`` from just far enough for every
+        corner of the box to lie inside a view of width / height ``aspect`` (the viewer's
+        vertical field of view, FOV_Y_DEG), so that what the box holds fills the view."""
+        if self.empty:
+            return None
+        d = np.asarray(direction, dtype=float)
+        d /= np.linalg.norm(d)
+        right = np.cross(-d, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, -d)
+        corners = (
+            np.array(
+                [[(a, b)[i] for a, b, i in zip(self.lo, self.hi, k, strict=True)] for k in CORNERS]
+            )
+            - (self.lo + self.hi) / 2
+        )
+        tan_y = math.tan(math.radians(FOV_Y_DEG) / 2)
+        # a corner at depth z towards the eye, x right and y up is inside the view when the
+        # eye stands at least z + |y| / tan_y (and z + |x| / (aspect tan_y)) from the centre
+        reach = corners @ d + np.maximum(
+            np.abs(corners @ up) / tan_y, np.abs(corners @ right) / (aspect * tan_y)
+        )
+        return self.eye(rr_blueprint, direction, FIT_MARGIN * float(np.max(reach)) / self.size)
+
+    @property
+    def size(self) -> float:
+        """The box's largest side (metres), at least 5 cm."""
+        return max(float(np.max(self.hi - self.lo)), 0.05)
 
 
 @dataclass
@@ -72,11 +110,22 @@ class ErrorMap:
 
 @dataclass
 class TargetGroup:
-    """A pose group's targets: its view name, the machine it sits on, where its targets are."""
+    """A pose group's targets: its view name, the machine it sits on, the box its view frames
+    (targets, arrows, labels, tool head) and the targets' own box."""
 
     name: str
     machine: str = ""
     bounds: Bounds = field(default_factory=Bounds)
+    targets: Bounds = field(default_factory=Bounds)
+
+    @property
+    def direction(self) -> tuple[float, float, float]:
+        """From the view's centre to its eye: a flat layer of targets (its height under
+        FLAT_SHARE of its width) seen from high above, so that it is not foreshortened and
+        the head over it stays short; a volume of targets from the front, lower."""
+        t = self.targets
+        flat = not t.empty and float(np.ptp([t.lo[2], t.hi[2]])) < FLAT_SHARE * t.size
+        return EYE_ABOVE if flat else EYE_DIRECTION
 
 
 class SecondTimeline(ValueError):
@@ -149,9 +198,10 @@ def _machine_contents(machine: str) -> list[str]:
     return ["world", f"{root}/**"]
 
 
-def machine_views(rrb: Any, log: Logged) -> list[Any]:
-    """One 3D view per pose group (its machine, its targets and arrows), the camera on the
-    group's targets; a machine without targets gets a view of its own."""
+def machine_views(rrb: Any, log: Logged, aspect: float = 1.0) -> list[Any]:
+    """One 3D view per pose group (its machine, its targets, arrows and labels), the camera
+    framing the group's targets, arrows, labels and tool head in a view of width / height
+    ``aspect``; a machine without targets gets a view of its own."""
     views = []
     for part, group in log.target_groups.items():
         contents = [*_machine_contents(group.machine), f"world/targets/{part}/**"]
@@ -161,7 +211,7 @@ def machine_views(rrb: Any, log: Logged) -> list[Any]:
                 origin="world",
                 contents=contents,
                 name=group.name,
-                eye_controls=bounds.eye(rrb, distance=2.6),
+                eye_controls=bounds.fit(rrb, aspect, group.direction),
             )
         )
     shown = {g.machine for g in log.target_groups.values()}
@@ -246,31 +296,50 @@ def _plots(rrb: Any, views: list[Any], alone: bool) -> Any | None:
     return rrb.Grid(*views, name="figures") if alone else rrb.Tabs(*views)
 
 
+def _n_machine_views(log: Logged) -> int:
+    shown = {g.machine for g in log.target_groups.values()}
+    return len(log.target_groups) + sum(m not in shown for m in log.machines)
+
+
+def view_aspect(n: int, width_share: float, height_share: float) -> float:
+    """Width / height of each of ``n`` views in a row (a grid beyond three, as rerun lays it
+    out) that takes ``width_share`` and ``height_share`` of a window of WINDOW pixels (a view's
+    title bar off its height)."""
+    cols = n if n <= 3 else math.ceil(math.sqrt(n))
+    rows = math.ceil(n / cols)
+    width, height = WINDOW
+    return (width * width_share / cols) / max(height * height_share / rows - TITLE_BAR, 1.0)
+
+
 def build_blueprint(log: Logged) -> Any:
     """The blueprint of a recording: the machine views and error maps on the left, the
     figures and plots and the text views on the right (with no error map, the plots take the
     error maps' place under the machine)."""
     import rerun.blueprint as rrb
 
-    machine = machine_views(rrb, log)
+    n_machine = _n_machine_views(log)
     maps = error_map_views(rrb, log)
-    plots = _plots(rrb, figure_views(rrb, log) + series_views(rrb, log), not (machine or maps))
+    plots = _plots(rrb, figure_views(rrb, log) + series_views(rrb, log), not (n_machine or maps))
+    texts = text_views(rrb, log)
     left_parts, left_shares = [], []
     right_parts, right_shares = [], []
-    if machine:
-        left_parts.append(_row(rrb, machine))
+    if n_machine:  # its views' shape from the layout, their cameras framed to fill them
+        plots_left = plots is not None and maps is None
+        left_height = 3.0 + 2.0 * (maps is not None) + 2.5 * plots_left
+        two_columns = texts is not None or (plots is not None and not plots_left)
+        aspect = view_aspect(n_machine, 5.0 / 9.0 if two_columns else 1.0, 3.0 / left_height)
+        left_parts.append(_row(rrb, machine_views(rrb, log, aspect)))
         left_shares.append(3.0)
     if maps is not None:
         left_parts.append(maps)
         left_shares.append(2.0)
     if plots is not None:
-        if machine and maps is None:
+        if n_machine and maps is None:
             left_parts.append(plots)
             left_shares.append(2.5)
         else:
             right_parts.append(plots)
             right_shares.append(1.5)
-    texts = text_views(rrb, log)
     if texts is not None:
         right_parts.append(texts)
         right_shares.append(1.5)

@@ -21,7 +21,7 @@ from scenarios.recording.parts import (
 from scenarios.recording.session import _active, entity_part
 from twin.mechanism import Mechanism
 
-ERROR_MAP_RADIUS = 0.004  # metres
+ERROR_MAP_SHARE = 0.3  # a node's radius as a share of the nodes' spacing: its colour seen
 RELATIVE_IMAGE = re.compile(r"!\[([^\]]*)\]\((?![a-zA-Z][a-zA-Z0-9+.-]*:)([^)\s]+)\)")
 
 
@@ -66,7 +66,7 @@ class ChartViews:
             rr.Points3D(
                 nodes,
                 colors=error_colors(worst, vmax),
-                radii=min(ERROR_MAP_RADIUS, 0.3 * spacing),
+                radii=ERROR_MAP_SHARE * spacing,
                 labels=labels,
                 show_labels=False,
             ),

@@ -13,15 +13,20 @@ from scenarios.recording.blueprints import TargetGroup
 from scenarios.recording.parts import _name, _xyzw, geom_shape
 from scenarios.recording.session import _active, entity_part
 from scenarios.recording.targets import (
+    ARROW_SHARE,
+    ERROR_COLOUR,
+    LEADER_COLOUR,
+    MEASURED_COLOUR,
     arrow_scale,
     error_labels,
     label_positions,
     radii,
     spread,
+    target_colours,
 )
 from twin.mechanism import Mechanism
 
-NOMINAL_COLOUR, MEASURED_COLOUR, ERROR_COLOUR = [110, 130, 255], [255, 130, 60], [230, 40, 40]
+FIELD_COLOUR = [235, 120, 120]  # every pose's arrow at once: lighter than the pose's own
 
 
 def _log_pose_set(
@@ -127,10 +132,13 @@ class MachineViews:
         group: str,
         scale: float | None = None,
         machine: str = "",
+        field: bool = False,
     ) -> None:
         """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3); the
         error arrows magnified ``scale`` times (None: the 1-2-5 factor that draws the largest
-        error as a fifth of the targets' spread, targets.arrow_scale).
+        error as at most 40 % of the targets' spread or of the tool head's size, whichever is
+        larger: a share of what the view frames, targets.arrow_scale); ``field``: every
+        pose's arrow shown at once as well (a layer of nodes, one target each).
 
         The bodies' transforms and the targets of all poses go out as one column per entity
         (what :meth:`log_pose` and :meth:`log_targets` log pose by pose)."""
@@ -144,9 +152,11 @@ class MachineViews:
                 f"{group}: {len(indices)} indices, {len(qpos)} configurations, targets "
                 f"{nominal.shape} and {measured.shape}: one of each per pose"
             )
-        scale = arrow_scale(nominal, measured) if scale is None else float(scale)
-        self._log_bodies_columns(timeline, indices, mech, qpos, machine)
-        self._log_targets(timeline, indices, nominal, measured, scale, group, machine)
+        head = self._log_bodies_columns(timeline, indices, mech, qpos, machine)
+        if scale is None:  # a share of what the view frames: the targets or the head
+            extent = max(spread(nominal), spread(head, least=0.0))
+            scale = arrow_scale(nominal, measured, ARROW_SHARE * extent)
+        self._log_targets(timeline, indices, nominal, measured, scale, group, machine, field, head)
 
     def _log_targets(
         self,
@@ -157,8 +167,14 @@ class MachineViews:
         scale: float,
         group: str,
         machine: str,
+        field: bool = False,
+        head: np.ndarray | None = None,
     ) -> None:
-        """The targets of every pose (P, T, 3) in one column per entity."""
+        """The targets of every pose (P, T, 3) in one column per entity: each target's nominal
+        point in its colour, the measured point at the tip of the error arrow (magnified
+        ``scale`` times), the error in mm on a label set off with a leader line; ``field``:
+        every pose's arrow shown at once too (static, lighter). The group's view is framed on
+        the targets, their arrows and labels and the points ``head`` (the tool's body)."""
         rr = self.rr
         nominal = np.asarray(nominal, dtype=float).reshape(len(indices), -1, 3)
         measured = np.asarray(measured, dtype=float).reshape(nominal.shape)
@@ -166,6 +182,7 @@ class MachineViews:
         n_poses, n_targets = nominal.shape[:2]
         lengths = [n_targets] * n_poses
         flat_nominal, flat_measured = nominal.reshape(-1, 3), measured.reshape(-1, 3)
+        arrows = (flat_measured - flat_nominal) * scale
         span = spread(nominal)
         point_radius, arrow_radius = radii(span)
         labels_at = label_positions(nominal, span).reshape(-1, 3)
@@ -173,19 +190,19 @@ class MachineViews:
         part = entity_part(group)
         root = f"world/targets/{part}"
 
-        def points(positions: np.ndarray, colour: list[int], radius: float) -> list[Any]:
+        def points(positions: np.ndarray, colours: Any, radius: float) -> list[Any]:
             return [
-                *rr.Points3D.columns(positions=positions).partition(lengths),
-                *rr.Points3D.columns(radii=[radius] * n_poses, colors=[colour] * n_poses),
+                *rr.Points3D.columns(positions=positions, colors=colours).partition(lengths),
+                *rr.Points3D.columns(radii=[radius] * n_poses),
             ]
 
         columns = {
-            "nominal": points(flat_nominal, NOMINAL_COLOUR, point_radius),
-            "measured": points(flat_measured, MEASURED_COLOUR, point_radius),
+            "nominal": points(flat_nominal, target_colours(n_poses, n_targets), point_radius),
+            "measured_magnified": points(
+                flat_nominal + arrows, [MEASURED_COLOUR] * len(flat_nominal), point_radius / 2
+            ),
             "error": [
-                *rr.Arrows3D.columns(
-                    origins=flat_nominal, vectors=(flat_measured - flat_nominal) * scale
-                ).partition(lengths),
+                *rr.Arrows3D.columns(origins=flat_nominal, vectors=arrows).partition(lengths),
                 *rr.Arrows3D.columns(
                     radii=[arrow_radius] * n_poses, colors=[ERROR_COLOUR] * n_poses
                 ),
@@ -195,23 +212,46 @@ class MachineViews:
                     positions=labels_at, labels=error_labels(flat_nominal, flat_measured)
                 ).partition(lengths),
                 *rr.Points3D.columns(
-                    radii=[point_radius / 3] * n_poses,
+                    radii=[point_radius / 4] * n_poses,
                     colors=[ERROR_COLOUR] * n_poses,
                     show_labels=[True] * n_poses,
+                ),
+            ],
+            "error_mm/leader": [
+                *rr.LineStrips3D.columns(
+                    strips=np.stack([flat_nominal, labels_at], axis=1)
+                ).partition(lengths),
+                *rr.LineStrips3D.columns(
+                    radii=[arrow_radius / 4] * n_poses, colors=[LEADER_COLOUR] * n_poses
                 ),
             ],
         }
         for name, cols in columns.items():
             self._rec.send_columns(f"{root}/{name}", indexes=times, columns=cols)
+        if field:
+            self._rec.log(
+                f"{root}/field",
+                rr.Arrows3D(
+                    origins=flat_nominal,
+                    vectors=arrows,
+                    radii=arrow_radius,
+                    colors=[FIELD_COLOUR],
+                ),
+                rr.Points3D(flat_nominal, radii=point_radius / 2, colors=[FIELD_COLOUR]),
+                static=True,
+            )
         self.logged.machine_bounds.add(flat_nominal)
         self.logged.poses.update(indices)
         entry = self.logged.target_groups.setdefault(
             part, TargetGroup(f"{group}: errors x{scale:g}", machine)
         )
         entry.bounds.add(flat_nominal)
+        entry.targets.add(flat_nominal)
         entry.bounds.add(labels_at)
+        entry.bounds.add(flat_nominal + arrows)
+        if head is not None:
+            entry.bounds.add(head)
 
-    @_active
     def _log_bodies_columns(
         self,
         timeline: str,
@@ -219,16 +259,32 @@ class MachineViews:
         mech: Mechanism,
         qpos: np.ndarray,
         machine: str = "",
-    ) -> None:
+    ) -> np.ndarray:
+        """The bodies' transforms at every pose, one column per body; returns the corners of
+        the boxes around the tool body's shown geoms at the first pose (metres, (K, 3)): the
+        tool head as the view opens, which it frames with the targets (at the other poses
+        the head moves over the targets, whose box the view holds)."""
         rr, m, d = self.rr, mech.model, mech.data
         self.logged.use_timeline(timeline)
         xpos = np.empty((len(qpos), m.nbody, 3))
         xquat = np.empty((len(qpos), m.nbody, 4))
+        tool = [
+            g
+            for g in range(m.ngeom)
+            if m.geom_bodyid[g] == mech.tool_body and geom_shape(self.rr, m, g) is not None
+        ]
+        # each geom's box in its own frame (MuJoCo's geom_aabb: centre, half sides): corners
+        signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+        local = m.geom_aabb[tool, None, :3] + signs[None] * m.geom_aabb[tool, None, 3:]
+        head = []
         for i, q in enumerate(qpos):
             d.qpos[:] = q
             mujoco.mj_kinematics(m, d)
             self.logged.machine_bounds.add(d.xpos[1:])
             xpos[i], xquat[i] = d.xpos, d.xquat
+            rot = d.geom_xmat[tool].reshape(-1, 3, 3)
+            if i == 0:
+                head.append(d.geom_xpos[tool, None] + np.einsum("gij,gcj->gci", rot, local))
         xyzw = xquat[:, :, [1, 2, 3, 0]]
         times = [rr.TimeColumn(timeline, sequence=indices)]
         for b in range(1, m.nbody):
@@ -238,6 +294,7 @@ class MachineViews:
                 columns=rr.Transform3D.columns(translation=xpos[:, b], quaternion=xyzw[:, b]),
             )
         self.logged.poses.update(indices)
+        return head[0].reshape(-1, 3) if head else np.empty((0, 3))
 
     def log_pose_set(
         self,

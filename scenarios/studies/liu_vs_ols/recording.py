@@ -6,12 +6,14 @@ named), the error maps, the coarse rounds and the parameter tables."""
 from __future__ import annotations
 
 import tempfile
+import textwrap
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from scenarios.recording.recorder import Recorder
+from scenarios.recording.targets import field_scale
 from twin.kinematics import forward_batch
 from twin.workspace import commands_for_poses
 
@@ -38,8 +40,9 @@ def record(
         poses = test[stages[0]][0]
         qpos = forward_batch(nominal, commands_for_poses(nominal, poses)).qpos
         tool = poses[:, :3]
-        # the tool point's error as scored (effects and all), magnified to be seen in each
-        # stage's view (the factor in its title, the size in mm on the label)
+        # the tool point's error as scored (effects and all) at every node of the layer at
+        # once, magnified to be seen in each stage's view (the factor in its title, the size
+        # in mm on the label of the node the machine stands at)
         for stage in stages:
             error = test[stage][1].position_vectors
             recorder.log_poses(
@@ -50,6 +53,8 @@ def record(
                 tool[:, None],
                 (tool + error)[:, None],
                 f"{stage}, test layer",
+                scale=field_scale(tool, tool + error),
+                field=True,
             )
     for group, by_stage in maps.items():
         for stage, (p, errs) in by_stage.items():
@@ -67,11 +72,12 @@ def loop_png(loop: Any) -> bytes:
     from scenarios.figures import plt, png_bytes
 
     diag = loop.diagnosis
-    if diag.plot is None:  # nothing named: say so in a figure of its own
-        fig, ax = plt.subplots(figsize=(7, 2))
-        ax.axis("off")
+    if diag.plot is None:  # nothing named: say so in a figure of its own, wrapped to fit it
         chosen, reason = loop.verdict()
-        ax.text(0.5, 0.5, f"loop: {chosen}\n{reason}", ha="center", va="center", wrap=True)
+        lines = [f"loop: {chosen}", *textwrap.wrap(reason, 70)]
+        fig, ax = plt.subplots(figsize=(7, 0.6 + 0.3 * len(lines)))
+        ax.axis("off")
+        ax.text(0.5, 0.5, "\n".join(lines), ha="center", va="center", fontsize=11)
         return png_bytes(fig)
     with tempfile.TemporaryDirectory() as tmp:
         path = save_diagnosis_png(diag, Path(tmp) / "loop.png")

@@ -9,6 +9,7 @@ import math
 from typing import Any
 
 from scenarios.files_loop import files_loop_sentence
+from scenarios.studies.liu_vs_ols.combinations import sentence as plan_sentence
 from scenarios.studies.liu_vs_ols.sentences import (
     effects_phrase,
     estimator_parameters,
@@ -355,6 +356,8 @@ def report(s: dict[str, Any]) -> str:
     figs = s.get("figures") or {}
     if figs:
         lines += ["## Error maps and estimates", ""]
+        for label, entry in (s.get("plan_combinations") or {}).items():
+            lines += [f"Estimates of `{label}`: {plan_sentence(entry)}", ""]
         lines += [f"![{name}]({path})" for name, path in figs.items()]
         lines.append("")
     return "\n".join(lines)

@@ -33,6 +33,7 @@ from calib.compensate import TwistCompensation
 from scenarios.config import Scenario
 from scenarios.progress import Progress
 from scenarios.recording.recorder import Recorder
+from scenarios.studies.liu_vs_ols.combinations import PlanReading, plan_readings, sentence
 from scenarios.studies.liu_vs_ols.loop import close_loop, close_loop_through_files
 from scenarios.studies.liu_vs_ols.noise import display_scale, eta_at_used, monte_carlo
 from scenarios.studies.liu_vs_ols.pipeline import (
@@ -258,9 +259,13 @@ def run(
         "identifiable": kept_names,
         "paper": PAPER,
     }
+    labels = [label for label in ("ols", "liu") if label in estimates]
+    readings = plan_readings(bench, cal, labels)
+    # what the fine plan's readings fix of each estimate, and what they cannot
+    summary["plan_combinations"] = {label: r.summary for label, r in readings.items()}
     summary["figures"] = {}
     if figures:
-        summary["figures"] = _write_figures(out_dir, maps, estimates, kept_names, shown)
+        summary["figures"] = _write_figures(out_dir, maps, readings)
         maps_png = out_dir / summary["figures"]["error_maps_position"]
         recorder.log_figure("error_maps", maps_png, "error maps: every stage, every layer")
     summary["runtime_s"] = time.perf_counter() - t_start
@@ -269,28 +274,25 @@ def run(
 
 
 def _write_figures(
-    out_dir: Path,
-    maps: dict[str, dict[str, Any]],
-    estimates: dict[str, tuple[Any, np.ndarray]],
-    kept_names: list[str],
-    shown: np.ndarray,
+    out_dir: Path, maps: dict[str, dict[str, Any]], readings: dict[str, PlanReading]
 ) -> dict[str, str]:
-    """The error maps and the parameter bar charts of OLS and Liu (matplotlib imported here)."""
-    from scenarios.figures import Bars, collection_paused, parameter_bars_pngs
+    """The error maps and, for OLS and Liu, the estimates beside what the plan reads of them
+    (matplotlib imported here)."""
+    from scenarios.figures import collection_paused
+    from scenarios.studies.liu_vs_ols.combinations_figure import combinations_png
     from scenarios.studies.liu_vs_ols.figures import write_figures
 
-    labels = [label for label in ("ols", "liu") if label in estimates]
-    charts = [
-        Bars(
-            out_dir / f"estimates_{label}.png",
-            f"polisher: {label} estimates of the identifiable set (mm, deg)",
-            estimates[label][0].x * shown,
-            estimates[label][0].std_errors * shown,
-        )
-        for label in labels
-    ]
     with collection_paused():
         written = write_figures(out_dir, maps)
-        parameter_bars_pngs(kept_names, charts)  # one figure, the names drawn once
-    written.update({f"estimates_{label}": f"estimates_{label}.png" for label in labels})
+        for label, r in readings.items():
+            combinations_png(
+                out_dir / f"estimates_{label}.png",
+                f"polisher, {label}",
+                r.combinations,
+                r.estimate,
+                r.std,
+                r.truth,
+                sentence(r.summary),
+            )
+    written.update({f"estimates_{label}": f"estimates_{label}.png" for label in readings})
     return written
