@@ -32,7 +32,8 @@ def report(s: dict[str, Any]) -> str:
         f"![singular values of the column-scaled H]({s['figures']['singular_values']})",
         "",
         f"Rank {s['rank_of_figure']} of {s['n_source_errors']}. Source errors mostly (share "
-        f"> 0.5) in the null space: {len(s['mostly_in_null_space'])}.",
+        f"> 0.5; a pair's members, exactly one half each, not counted) in the null space: "
+        f"{len(s['mostly_in_null_space'])}.",
         "",
         f"![what the plan cannot see, by part of the machine]({s['figures']['null_space']})",
         "",
