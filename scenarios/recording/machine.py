@@ -136,7 +136,7 @@ class MachineViews:
     ) -> None:
         """Poses (P, nq) at ``indices`` of ``timeline``, each with its targets (P, T, 3); the
         error arrows magnified ``scale`` times (None: the 1-2-5 factor that draws the largest
-        error as at most 40 % of the targets' spread or of the tool head's size, whichever is
+        error as at most 80 % of the targets' spread or of the tool head's size, whichever is
         larger: a share of what the view frames, targets.arrow_scale); ``field``: every
         pose's arrow shown at once as well (a layer of nodes, one target each).
 

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 TARGET_RADIUS = 0.003  # metres, at least
-ARROW_SHARE = 0.4  # the largest arrow as a share of the targets' spread
+ARROW_SHARE = 0.8  # the largest arrow as a share of the targets' spread
 FIELD_SHARE = 0.3  # the largest arrow of a field of nodes as a share of the field's extent
 LABEL_OFFSET = 0.15  # a label's distance from its target, as a share of the spread
 # each target's nominal point (1, 2, 3 ...): blue, green, purple, brown, teal; the measured
@@ -36,7 +36,7 @@ def spread(nominal: np.ndarray, least: float = 0.05) -> float:
 
 def arrow_scale(nominal: np.ndarray, measured: np.ndarray, length: float | None = None) -> float:
     """A 1-2-5 magnification that draws the largest error as at most ``length`` metres
-    (default 40 % of the targets' spread over all poses): errors of micrometres on a machine
+    (default 80 % of the targets' spread over all poses): errors of micrometres on a machine
     of a metre stay visible."""
     err = np.linalg.norm(np.asarray(measured) - np.asarray(nominal), axis=-1)
     largest = float(np.max(err[np.isfinite(err)], initial=0.0))
