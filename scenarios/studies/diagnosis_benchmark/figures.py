@@ -129,15 +129,19 @@ def rate_png(path: Path, by_multiplier: dict[str, dict[str, Any]], strong: float
     )
     fig, ax = plt.subplots(figsize=(6, 3.6))
     ax.plot(x, 100 * rate, "o-", color="#4c78a8")
-    for m, xi, r in zip(sizes, x, rate, strict=True):
+    for i, (m, xi, r) in enumerate(zip(sizes, x, rate, strict=True)):
         n, a = by_multiplier[m]["n"], by_multiplier[m]["n_absorbed"]
         note = f"{n} cases" + (f", {a} absorbed" if a else "")
+        # below the point where the line rises to the next one, so that it does not cross the
+        # text; the end points' text kept inside the axes
+        below = i + 1 < len(rate) and bool(rate[i + 1] > r)
         ax.annotate(
             note,
             (xi, 100 * (0 if np.isnan(r) else r)),
-            xytext=(0, 6),
+            xytext=(0, -8 if below else 6),
             textcoords="offset points",
-            ha="center",
+            ha="left" if i == 0 else "right" if i == len(rate) - 1 else "center",
+            va="top" if below else "bottom",
             fontsize=7,
         )
     ax.axvline(strong, color="k", lw=0.8, ls="--", label=f"{strong:g} x noise: the goal's cases")
