@@ -9,6 +9,7 @@ import os
 
 import numpy as np
 import pytest
+from diagnosis_support import synthetic_context
 
 from calib.diagnosis import parallel
 from calib.diagnosis.candidates import library
@@ -21,19 +22,7 @@ N, T, A, P = 120, 3, 6, 12
 
 def _problem() -> tuple[Problem, Context, list]:
     rng = np.random.default_rng(7)
-    slide = np.array([True, True, True, False, False, False])
-    commands = np.where(slide, rng.uniform(0.6, 1.1, (N, A)), rng.uniform(-1.0, 1.0, (N, A)))
-    ctx = Context(
-        commands=commands,
-        time=np.arange(N, dtype=float),
-        previous=commands[0] - 0.01,
-        is_slide=slide,
-        actuator_names=tuple(f"a{i}" for i in range(A)),
-        time_unit="pose",
-        j_act=rng.normal(size=(N, 3 * T, A)),
-        targets=rng.normal(size=(N, T, 3)),
-        head=np.array([1.5, 0.0, 0.3]),
-    )
+    ctx = synthetic_context(rng, N, A, T)
     cands = library(ctx, masses_defaulted=True)
     by = {c.name: c for c in cands}
     geo = rng.normal(size=(N, 3 * T, P))

@@ -8,10 +8,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+from diagnosis_support import synthetic_context
 
 from calib.diagnosis.candidate import PoseRows
 from calib.diagnosis.candidates import library
-from calib.diagnosis.context import Context
 from calib.diagnosis.gravity import GravityLoads
 from calib.diagnosis.problem import (
     RCOND,
@@ -39,22 +39,9 @@ N, T, A, P = 60, 3, 6, 12
 @pytest.fixture(scope="module")
 def setup():
     rng = np.random.default_rng(3)
-    slide = np.array([True, True, True, False, False, False])
-    commands = np.where(slide, rng.uniform(0.6, 1.1, (N, A)), rng.uniform(-1.0, 1.0, (N, A)))
     rows = np.ones((N, 3 * T), bool)
     rows[5, :3] = False  # a rejected reading
-    ctx = Context(
-        commands=commands,
-        time=np.arange(N, dtype=float),
-        previous=commands[0] - 0.01,
-        is_slide=slide,
-        actuator_names=tuple(f"a{i}" for i in range(A)),
-        time_unit="pose",
-        j_act=rng.normal(size=(N, 3 * T, A)),
-        targets=rng.normal(size=(N, T, 3)),
-        head=np.array([1.5, 0.0, 0.3]),
-        rows=rows,
-    )
+    ctx = synthetic_context(rng, N, A, T, rows)
     prob = Problem(rng.normal(size=(N, 3 * T)) * rows, rng.normal(size=(N, 3 * T, P)))
     return ctx, prob
 
