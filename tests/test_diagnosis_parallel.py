@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 from diagnosis_support import synthetic_context
 
+from calib.correction.kernel_ridge import cross_validate
 from calib.diagnosis import parallel
 from calib.diagnosis.candidates import library
 from calib.diagnosis.context import Context
 from calib.diagnosis.problem import SCHEMES, Problem, fold_labels
 from calib.diagnosis.select import select_effects
+from calib.diagnosis.unexplained import kernel_heldout
 
 N, T, A, P = 120, 3, 6, 12
 
@@ -92,3 +94,36 @@ def test_progress_line_only_on_a_long_run(monkeypatch, capsys):
     err = capsys.readouterr().err
     assert err.startswith("diagnosis: 2 of 4 candidates evaluated (backlash) after ")
     assert err.rstrip().endswith(" s on 2 processes")
+
+
+def test_kernel_corrections_in_two_processes_are_those_of_one(monkeypatch):
+    """Every (group, scheme, fold) kernel correction of the 'nothing physical' stage, and the
+    residual correction's cross-validation folds: the same numbers in two processes."""
+    prob, ctx, _ = _problem()
+    folds = {s: fold_labels(ctx.time, 5, s) for s in SCHEMES}
+    keep = np.ones(prob.r.shape)
+    groups = {  # features(ctx) without the orientation (the synthetic poses have none)
+        "tool position": ctx.targets.mean(axis=1),
+        "actuator commands": ctx.commands,
+        "measurement order": ctx.time[:, None],
+    }
+    x = groups["tool position"]
+    labels = fold_labels(ctx.time, 5, "blocked")
+    got = {}
+    for workers in ("1", "2"):
+        monkeypatch.setenv(parallel.ENV_WORKERS, workers)
+        got[workers] = (
+            kernel_heldout(prob, groups, folds, keep),
+            cross_validate(x, prob.r, labels),
+        )
+    (held_1, cv_1), (held_2, cv_2) = got["1"], got["2"]
+    assert held_1.keys() == groups.keys() == held_2.keys()
+    for g in groups:
+        for s in SCHEMES:
+            assert held_1[g][s].shape == (N,) and np.all(held_1[g][s] > 0)
+            np.testing.assert_array_equal(held_1[g][s], held_2[g][s])
+    np.testing.assert_array_equal(cv_1.sse, cv_2.sse)
+    np.testing.assert_array_equal(cv_1.after, cv_2.after)
+    np.testing.assert_array_equal(cv_1.distance, cv_2.distance)
+    assert (cv_1.length_scale, cv_1.ratio) == (cv_2.length_scale, cv_2.ratio)
+    assert np.all(cv_1.distance > 0)  # every pose away from its fold's training poses

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from calib.cli.common import print_verdict, run_fit
-from calib.data import DatasetError, read_dataset, select_set, subset
+from calib.data import Dataset, DatasetError, read_dataset, select_set, subset
 from calib.fit import ASSUMED_SIGMA_MM, EXIT_OK, Accuracy, CalibrationRun, noise_rule, rejected_rows
 from calib.loop import effect_content
 from common.atomic_files import json_text
@@ -24,17 +24,18 @@ ASSUMED_NOISE = (
 
 
 def _held_out_rows(
-    args: argparse.Namespace, fitted_ids: np.ndarray, model_name: str
+    args: argparse.Namespace, fitted_ids: np.ndarray, data: Dataset
 ) -> tuple[object, str, tuple[object, str | None]] | None:
     """The held-out rows for the diagnosis, a sentence saying which, and how ``verify``
     scores them (a dataset and a set name): ``--test-set NAME`` of ``--test FILE`` (or of
     ``--data``); ``--test FILE`` alone: its 'test' rows if it has any, else the rows of the
-    ``--data`` file not fitted, else all of FILE. None without either option."""
+    ``--data`` file not fitted, else all of FILE. None without either option. ``data``: the
+    ``--data`` file, read once (a campaign's file takes a second to read)."""
     if not args.test and not args.test_set:
         return None
     same = not args.test or Path(args.test).resolve() == Path(args.data).resolve()
     path = args.data if same else args.test
-    ds = read_dataset(path, expected_model=model_name)
+    ds = data if same else read_dataset(path, expected_model=data.model)
     sets = [str(s) for s in ds.sets]
     view: tuple[object, str | None] = (ds, None)
     if args.test_set:
@@ -95,18 +96,20 @@ def _diagnosis_test_set(held: tuple[object, str] | None, run: CalibrationRun):
     return test, sentence
 
 
-def _checked_inputs(args: argparse.Namespace) -> tuple[tuple | None, Accuracy]:
-    """What diagnose needs besides the fit, checked before it: the held-out rows and the
-    noise level (identify's rule: declared, else the repeats, else the same assumption)."""
+def _checked_inputs(args: argparse.Namespace) -> tuple[tuple | None, Accuracy, Dataset]:
+    """What diagnose needs besides the fit, checked before it: the held-out rows, the
+    noise level (identify's rule: declared, else the repeats, else the same assumption) and
+    the ``--data`` file as read."""
     data = read_dataset(args.data)
     picked, _ = select_set(data, args.set, "calibration")
-    return _held_out_rows(args, picked.pose_ids, data.model), noise_rule(args.sigma_mm, picked)
+    held = _held_out_rows(args, picked.pose_ids, data)
+    return held, noise_rule(args.sigma_mm, picked), data
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     from calib.diagnosis import diagnose
 
-    held, accuracy = _checked_inputs(args)  # before the fit: a wrong input costs no fit
+    held, accuracy, data = _checked_inputs(args)  # before the fit: a wrong input costs no fit
     run = run_fit(args)
     if isinstance(run, int):
         return run
@@ -131,7 +134,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     test, test_sentence = _diagnosis_test_set(held, run)
     if test_sentence:
         print(test_sentence)
-    elif "test" in {str(x) for x in read_dataset(args.data).sets} and args.set != "test":
+    elif "test" in {str(x) for x in data.sets} and args.set != "test":
         print("note: the data's 'test' rows were not used; --test-set test holds them out")
     typed = None if accuracy.source == "repeats" else accuracy.sigma_mm
     ds = run.dataset

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
+from calib.diagnosis.parallel import map_in_order, worker_count
+
 MAX_TRAINING_POSES = 1500
 # ... and at most this many in each cross-validation fold's fit, which only chooses the length
 # scale and the ratio: 35 eigendecompositions of its kernel (5 folds x 7 length scales) cost
@@ -162,21 +164,33 @@ def cross_validate(
     z = (x - mean) / scale
     d = z.shape[1]
     n_l, n_r = len(length_scales), len(ratios)
-    pred = np.zeros((n_l, n_r, *y.shape))
-    distance = np.zeros(len(z))
-    for f in np.unique(labels):
-        test = labels == f
+    folds = np.unique(labels)
+
+    def one(k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(distance, predictions (n_l, n_r, poses, R)) of fold ``folds[k]``'s poses."""
+        test = labels == folds[k]
         tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)), CV_TRAINING_POSES)]
         zt, yt = z[tr_idx], y[tr_idx]
         d2_tt, d2_vt = sq_dist(zt, zt), sq_dist(z[test], zt)
-        distance[test] = np.sqrt(np.min(d2_vt, axis=1))
+        held = np.zeros((n_l, n_r, int(np.sum(test)), y.shape[1]))
         for i, ls in enumerate(length_scales):
             w, u = np.linalg.eigh(np.exp(-0.5 * d2_tt / (ls**2 * d)))
             w = np.clip(w, 0.0, None)
             uy = u.T @ yt
             kv = np.exp(-0.5 * d2_vt / (ls**2 * d)) @ u
             for j, r in enumerate(ratios):
-                pred[i, j][test] = kv @ (uy / (w + r)[:, None])
+                held[i, j] = kv @ (uy / (w + r)[:, None])
+        return np.sqrt(np.min(d2_vt, axis=1)), held
+
+    pred = np.zeros((n_l, n_r, *y.shape))
+    distance = np.zeros(len(z))
+    # each fold its own fit: side by side in worker processes on a long run, the numbers of
+    # one process bit for bit (calib.diagnosis.parallel)
+    workers = worker_count(y.size, len(folds))
+    for f, (dist, held) in zip(folds, map_in_order(one, len(folds), workers), strict=True):
+        test = labels == f
+        distance[test] = dist
+        pred[:, :, test] = held
     sse = np.sum((y[None, None] - pred) ** 2, axis=(2, 3))
     i, j = np.unravel_index(int(np.argmin(sse)), sse.shape)
     return CrossValidation(sse, length_scales[i], ratios[j], y, y - pred[i, j], distance)

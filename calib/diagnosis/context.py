@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 
 from calib.diagnosis.gravity import GravityLoads, gravity_loads
+from calib.diagnosis.parallel import map_in_order, worker_count
 from calib.fit.model import CalibrationModel
 from twin.kinematics.closure import update_kinematics
 from twin.kinematics.sensitivity import target_jacobian
@@ -155,7 +156,17 @@ def sensitivities(
     mech = model.mechanism(values)
     pset = ParameterSet(plist, mech.model)
     zero = np.zeros(len(pset))
-    jac = np.array([target_jacobian(mech, pset, zero, q) for q in qpos])  # (N, R, n)
+    # the poses in chunks, side by side in worker processes on a long run (each pose's
+    # Jacobian is that of one process, bit for bit: calib.diagnosis.parallel)
+    rows = 3 * len(model.nominal.target_names) * len(qpos)
+    workers = worker_count(rows, len(qpos))
+    chunks = np.array_split(np.arange(len(qpos)), max(1, min(len(qpos), 4 * workers)))
+
+    def chunk(k: int) -> list[np.ndarray]:
+        return [target_jacobian(mech, pset, zero, qpos[i]) for i in chunks[k]]
+
+    per_pose = [j for part in map_in_order(chunk, len(chunks), workers) for j in part]
+    jac = np.array(per_pose)  # (N, R, n)
     a = len(offsets)
     j_act = jac[:, :, :a]
     if not with_extra:

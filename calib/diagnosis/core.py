@@ -280,7 +280,7 @@ def diagnose(
         )
     # nothing physical: is there structure a kernel correction explains on held-out poses?
     feats = features(ctx)
-    kern = {group: kernel_heldout(prob, x, fold_sets, keep) for group, x in feats.items()}
+    kern = kernel_heldout(prob, feats, fold_sets, keep)
     best_group, best_gain = None, 0.0
     for group, held in kern.items():
         gains, ok = [], True

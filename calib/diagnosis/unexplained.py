@@ -15,6 +15,7 @@ import numpy as np
 from calib.analysis.rank_structure import rank_correlations
 from calib.analysis.spearman import spearman
 from calib.diagnosis.context import Context
+from calib.diagnosis.parallel import Progress, map_in_order, worker_count
 from calib.diagnosis.problem import Problem
 from twin.rotations import rotvec_from_matrix
 
@@ -150,17 +151,31 @@ def kernel_correction(prob: Problem, x: np.ndarray, train: np.ndarray, keep: np.
 
 
 def kernel_heldout(
-    prob: Problem, x: np.ndarray, folds: dict[str, np.ndarray], keep: np.ndarray
-) -> dict[str, np.ndarray]:
-    """Per-pose held-out SSE of geometry + the kernel correction over ``x``, per scheme."""
-    out = {}
-    for scheme, labels in folds.items():
-        sse = np.zeros(len(labels))
-        for f in range(int(labels.max()) + 1):
-            train, test = labels != f, labels == f
-            corrected, _ = kernel_correction(prob, x, train, keep)
-            sse[test] = np.sum(corrected(test) ** 2, axis=1)
-        out[scheme] = sse
+    prob: Problem, groups: dict[str, np.ndarray], folds: dict[str, np.ndarray], keep: np.ndarray
+) -> dict[str, dict[str, np.ndarray]]:
+    """Per-pose held-out SSE of geometry + the kernel correction over each group's pose
+    variables (``groups``: name -> (N, d)), per fold scheme. Every (group, scheme, fold) is
+    its own fit, evaluated side by side in worker processes on a long run (the numbers of
+    one process, bit for bit: calib.diagnosis.parallel)."""
+    tasks = [
+        (group, scheme, f)
+        for group in groups
+        for scheme, labels in folds.items()
+        for f in range(int(labels.max()) + 1)
+    ]
+
+    def one(i: int) -> np.ndarray:
+        group, scheme, f = tasks[i]
+        test = folds[scheme] == f
+        corrected, _ = kernel_correction(prob, groups[group], ~test, keep)
+        return np.sum(corrected(test) ** 2, axis=1)
+
+    out = {g: {s: np.zeros(len(labels)) for s, labels in folds.items()} for g in groups}
+    workers = worker_count(prob.r.size, len(tasks))
+    progress = Progress("kernel corrections", len(tasks), workers)
+    for (group, scheme, f), sse in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
+        out[group][scheme][folds[scheme] == f] = sse
+        progress.step(group)
     return out
 
 
