@@ -2,14 +2,7 @@
 
 from __future__ import annotations
 
-TARGET_TEXT = {
-    "machines.hexapod.identify_speedup_vs_scipy_fd": (">=", "identification speedup vs scipy FD"),
-    "machines.hexapod.fk_batch_poses_per_s": (">=", "batched FK poses/s"),
-    "scenario_optimal_poses_s": ("<=", "optimal_poses (s)"),
-    "scenario_liu_vs_ols_s": ("<=", "liu_vs_ols with figures (s)"),
-    "scenario_liu_vs_ols_no_figures_s": ("<=", "liu_vs_ols without figures (s)"),
-    "scenario_hexapod_paper_s": ("<=", "hexapod_paper (s)"),
-}
+from bench.targets import TARGETS, value_at
 
 
 def _fmt(v) -> str:
@@ -22,13 +15,6 @@ def _fmt(v) -> str:
     if isinstance(v, float):
         return f"{v:.4g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.2e}"
     return str(v)
-
-
-def _get(out: dict, key: str):
-    v = out
-    for k in key.split("."):
-        v = v.get(k) if isinstance(v, dict) else None
-    return v
 
 
 def bench_markdown(out: dict) -> str:
@@ -44,8 +30,8 @@ def bench_markdown(out: dict) -> str:
         "|---|---|---|---|",
     ]
     for key, target in out["targets"].items():
-        op, label = TARGET_TEXT.get(key, ("", key))
-        value = _get(out, key)
+        op, _, label = TARGETS.get(key, ("", None, key))
+        value = value_at(out, key)
         met = out["meets_targets"].get(key)
         met_text = "not measured" if met is None else ("met" if met else "**not met**")
         lines.append(f"| {label} (`{key}`) | {_fmt(value)} | {op} {target} | {met_text} |")
@@ -106,4 +92,6 @@ def _scaling_lines(scaling: dict) -> list[str]:
     for machine, block in scaling.items():
         for key, r in block["ratios"].items():
             lines.append(f"| {machine} | {key} | {_fmt(r['time'])} | {_fmt(r['memory'])} |")
+        for n, r in block.get("diagnose_over_identify", {}).items():
+            lines.append(f"| {machine} | diagnose over identify, {n} readings | {_fmt(r)} | - |")
     return lines

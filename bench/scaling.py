@@ -62,11 +62,12 @@ def campaign(machine: str, n_readings: int, folder: Path, seed: int = 0) -> Path
     return write_dataset(ds, folder / f"{machine}_{n_readings}.csv")
 
 
-def run_measured(args: list[str]) -> dict:
-    """Run ``python -m calib ARGS`` in a child process: wall time, peak memory, exit code."""
+def run_measured(args: list[str], launcher: tuple[str, ...] = ("-m", "calib")) -> dict:
+    """Run ``python -m calib ARGS`` (``launcher``: what precedes ARGS) in a child process:
+    wall time, peak memory, exit code."""
     start = time.perf_counter()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "calib", *args],
+        [sys.executable, *launcher, *args],
         cwd=REPO_ROOT,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
@@ -101,7 +102,15 @@ def scaling(readings: tuple[int, ...] = READINGS, diagnose_max: int | None = Non
                     row["diagnose"] = run_measured(["diagnose", *common, "--test-set", "test"])
                 rows[str(n)] = row
                 print(f"scaling {machine} {n} readings: {_line(row)}", flush=True)
-            out[machine] = {"by_readings": rows, "ratios": _ratios(rows, readings)}
+            out[machine] = {
+                "by_readings": rows,
+                "ratios": _ratios(rows, readings),
+                "diagnose_over_identify": {
+                    n: row["diagnose"]["wall_s"] / row["identify"]["wall_s"]
+                    for n, row in rows.items()
+                    if "diagnose" in row
+                },
+            }
     return out
 
 
