@@ -316,15 +316,14 @@ class ParameterSet:
         w = np.zeros((n, 3))
         o = np.zeros((n, 3))
         xmat = data.xmat.reshape(-1, 3, 3)
-        rotvecs = self.rotation_vectors(np.asarray(values, dtype=float))
+        rotated = self._rotated_axes(values)
         for k in range(n):
             kind, i = self.kind[k], self.element[k]
             if kind == 0:
                 t[k] = xmat[model.body_parentid[i]] @ self.axis[k]
             elif kind == 1:
                 par = model.body_parentid[i]
-                jl = left_jacobian_so3(rotvecs[int(i)])
-                w[k] = xmat[par] @ (jl @ self.axis[k])
+                w[k] = xmat[par] @ rotated[k]
                 o[k] = data.xpos[par] + xmat[par] @ model.body_pos[i]
             elif kind == 2:
                 t[k] = xmat[model.site_bodyid[i]] @ self.axis[k]
@@ -336,6 +335,23 @@ class ParameterSet:
             else:
                 t[k] = data.xaxis[i]
         return t, w, o
+
+    def _rotated_axes(self, values: np.ndarray) -> dict[int, np.ndarray]:
+        """J_l(w) axis of each body-rotation parameter k at ``values``, in the parent's frame:
+        the same for every pose, so kept (per thread) for the last ``values`` seen; a
+        per-pose Jacobian over thousands of poses otherwise spent half its time on it."""
+        values = np.asarray(values, dtype=float)
+        key = values.tobytes()
+        held = getattr(self._local, "rotated", None)
+        if held is None or held[0] != key:
+            rotvecs = self.rotation_vectors(values)
+            rotated = {
+                int(k): left_jacobian_so3(rotvecs[int(self.element[k])]) @ self.axis[k]
+                for k in np.flatnonzero(self.kind == 1)
+            }
+            held = (key, rotated)
+            self._local.rotated = held
+        return held[1]
 
     def screws_soa(
         self,
@@ -356,10 +372,8 @@ class ParameterSet:
         t[:, k0] = np.einsum("ijkn,kj->ikn", xmat[:, :, model.body_parentid[el[k0]]], axis[k0])
         k1 = np.flatnonzero(kind == 1)
         if k1.size:
-            rotvecs = self.rotation_vectors(np.asarray(values, dtype=float))
-            local = np.array(
-                [left_jacobian_so3(rotvecs[int(el[k])]) @ axis[k] for k in k1]
-            ).reshape(-1, 3)
+            rotated = self._rotated_axes(values)
+            local = np.array([rotated[int(k)] for k in k1]).reshape(-1, 3)
             par = model.body_parentid[el[k1]]
             w[:, k1] = np.einsum("ijkn,kj->ikn", xmat[:, :, par], local)
             o[:, k1] = xpos[:, par] + np.einsum(

@@ -165,32 +165,32 @@ def cross_validate(
     d = z.shape[1]
     n_l, n_r = len(length_scales), len(ratios)
     folds = np.unique(labels)
+    tasks = [(f, i) for f in folds for i in range(n_l)]
 
     def one(k: int) -> tuple[np.ndarray, np.ndarray]:
-        """(distance, predictions (n_l, n_r, poses, R)) of fold ``folds[k]``'s poses."""
-        test = labels == folds[k]
+        """(distance, predictions (n_r, poses, R)) of fold ``f``'s poses at length scale i."""
+        f, i = tasks[k]
+        test = labels == f
         tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)), CV_TRAINING_POSES)]
         zt, yt = z[tr_idx], y[tr_idx]
         d2_tt, d2_vt = sq_dist(zt, zt), sq_dist(z[test], zt)
-        held = np.zeros((n_l, n_r, int(np.sum(test)), y.shape[1]))
-        for i, ls in enumerate(length_scales):
-            w, u = np.linalg.eigh(np.exp(-0.5 * d2_tt / (ls**2 * d)))
-            w = np.clip(w, 0.0, None)
-            uy = u.T @ yt
-            kv = np.exp(-0.5 * d2_vt / (ls**2 * d)) @ u
-            for j, r in enumerate(ratios):
-                held[i, j] = kv @ (uy / (w + r)[:, None])
+        ls = length_scales[i]
+        w, u = np.linalg.eigh(np.exp(-0.5 * d2_tt / (ls**2 * d)))
+        w = np.clip(w, 0.0, None)
+        uy = u.T @ yt
+        kv = np.exp(-0.5 * d2_vt / (ls**2 * d)) @ u
+        held = np.array([kv @ (uy / (w + r)[:, None]) for r in ratios])
         return np.sqrt(np.min(d2_vt, axis=1)), held
 
     pred = np.zeros((n_l, n_r, *y.shape))
     distance = np.zeros(len(z))
-    # each fold its own fit: side by side in worker processes on a long run, the numbers of
-    # one process bit for bit (calib.diagnosis.parallel)
-    workers = worker_count(y.size, len(folds))
-    for f, (dist, held) in zip(folds, map_in_order(one, len(folds), workers), strict=True):
+    # each (fold, length scale) its own eigendecomposition: side by side in worker processes
+    # on a long run, the numbers of one process bit for bit (calib.diagnosis.parallel)
+    workers = worker_count(y.size, len(tasks))
+    for (f, i), (dist, held) in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
         test = labels == f
         distance[test] = dist
-        pred[:, :, test] = held
+        pred[i][:, test] = held
     sse = np.sum((y[None, None] - pred) ** 2, axis=(2, 3))
     i, j = np.unravel_index(int(np.argmin(sse)), sse.shape)
     return CrossValidation(sse, length_scales[i], ratios[j], y, y - pred[i, j], distance)
