@@ -25,7 +25,7 @@ def command_line_start(repeats: int = 3) -> dict:
         ]
         runs = {"import": [], "identify": []}
         for _ in range(repeats):
-            runs["import"].append(run_measured(["import calib.cli.commands"], ("-c",)))
+            runs["import"].append(run_measured([], "import:calib.cli.commands"))
             runs["identify"].append(run_measured(identify))
     for name, rs in runs.items():
         failed = [r for r in rs if r["exit_code"] != 0]

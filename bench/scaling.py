@@ -5,13 +5,13 @@ readings of a 6R arm (one reflector) and of the hexapod (three reflectors), and 
 
 The readings are made by the twin (a uniform truth, a 0.01 mm tracker in the base frame, 90 %
 calibration and 10 % test rows) and written as a Dataset; each command runs in its own child
-process whose peak resident memory the operating system reports (``os.wait4``).
+process, which reports its own peak resident memory (bench.child_peak: not the benchmark
+process's, which Linux would carry into it).
 """
 
 from __future__ import annotations
 
 import itertools
-import os
 import subprocess
 import sys
 import tempfile
@@ -62,26 +62,27 @@ def campaign(machine: str, n_readings: int, folder: Path, seed: int = 0) -> Path
     return write_dataset(ds, folder / f"{machine}_{n_readings}.csv")
 
 
-def run_measured(args: list[str], launcher: tuple[str, ...] = ("-m", "calib")) -> dict:
-    """Run ``python -m calib ARGS`` (``launcher``: what precedes ARGS) in a child process:
-    wall time, peak memory, exit code."""
-    start = time.perf_counter()
-    proc = subprocess.Popen(
-        [sys.executable, *launcher, *args],
-        cwd=REPO_ROOT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - start
-    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    # ru_maxrss is in kilobytes on Linux
+def run_measured(args: list[str], module: str = "calib") -> dict:
+    """Run ``python -m MODULE ARGS`` (``module`` "import:NAME": only import NAME) in a child
+    process: wall time, its own peak memory (bench.child_peak), exit code."""
+    with tempfile.TemporaryDirectory() as tmp:
+        peak_file = Path(tmp) / "peak_kb"
+        start = time.perf_counter()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "bench.child_peak", str(peak_file), module, *args],
+            cwd=REPO_ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        _, err_bytes = proc.communicate()
+        wall = time.perf_counter() - start
+        peak_kb = float(peak_file.read_text()) if peak_file.is_file() else float("nan")
+    err = err_bytes.decode(errors="replace")
     return {
         "wall_s": wall,
-        "peak_mb": usage.ru_maxrss / 1024.0,
+        "peak_mb": peak_kb / 1024.0,
         "exit_code": proc.returncode,
-        **({"stderr": err[-500:]} if proc.returncode not in (0,) else {}),
+        **({"stderr": err[-500:]} if proc.returncode != 0 else {}),
     }
 
 

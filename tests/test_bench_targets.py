@@ -4,7 +4,10 @@ measured')."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from bench.report import bench_markdown
+from bench.scaling import run_measured
 from bench.targets import TARGETS, meets, value_at
 
 
@@ -46,3 +49,14 @@ def test_report_says_met_not_met_and_not_measured():
     line = next(x for x in md.splitlines() if "`command_line.identify_over_import`" in x)
     assert line.endswith("| - | <= 2 | not measured |")
     assert "| arm | diagnose over identify, 10000 readings | 15 | - |" in md
+
+
+def test_a_child_reports_its_own_peak_memory_not_the_benchmarks():
+    """Linux carries a process's resident high-water mark across exec: a command started by a
+    large benchmark process must still report its own peak (bench.child_peak)."""
+    held = np.ones(40_000_000)  # 320 MB resident in this process
+    small = run_measured([], "import:json")
+    assert held.sum() == 40_000_000
+    assert small["exit_code"] == 0 and 1.0 < small["peak_mb"] < 100.0
+    failed = run_measured(["identify"])  # the command's own exit code and message come back
+    assert failed["exit_code"] == 2 and "required: --model" in failed["stderr"]
