@@ -1,5 +1,5 @@
 """The ground floor, below twin: files written whole or not at all (atomic writes, sets of files
-written as one), and the lazy package faces."""
+written as one), the lazy package faces, and independent tasks in worker processes."""
 
 from common.face import face
 
@@ -13,6 +13,11 @@ __all__, __getattr__, __dir__ = face(
             "write_json_atomic",
             "write_text_atomic",
             "write_with_atomic",
+        ),
+        "worker_processes": (
+            "Progress",
+            "map_in_order",
+            "worker_count",
         ),
         "write_set": (
             "WriteSetError",

@@ -12,12 +12,12 @@ import pytest
 from diagnosis_support import synthetic_context
 
 from calib.correction.kernel_ridge import cross_validate
-from calib.diagnosis import parallel
 from calib.diagnosis.candidates import library
 from calib.diagnosis.context import Context
 from calib.diagnosis.problem import SCHEMES, Problem, fold_labels
 from calib.diagnosis.select import select_effects
 from calib.diagnosis.unexplained import kernel_heldout
+from common import worker_processes as parallel
 
 N, T, A, P = 120, 3, 6, 12
 

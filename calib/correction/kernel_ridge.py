@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from calib.diagnosis.parallel import map_in_order, worker_count
+from common.worker_processes import map_in_order, worker_count
 
 MAX_TRAINING_POSES = 1500
 # ... and at most this many in each cross-validation fold's fit, which only chooses the length
@@ -185,7 +185,7 @@ def cross_validate(
     pred = np.zeros((n_l, n_r, *y.shape))
     distance = np.zeros(len(z))
     # each (fold, length scale) its own eigendecomposition: side by side in worker processes
-    # on a long run, the numbers of one process bit for bit (calib.diagnosis.parallel)
+    # on a long run, the numbers of one process bit for bit (common.worker_processes)
     workers = worker_count(y.size, len(tasks))
     for (f, i), (dist, held) in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
         test = labels == f

@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 
 from calib.diagnosis.gravity import GravityLoads, gravity_loads
-from calib.diagnosis.parallel import map_in_order, worker_count
 from calib.fit.model import CalibrationModel
+from common.worker_processes import map_in_order, worker_count
 from twin.kinematics.closure import update_kinematics
 from twin.kinematics.sensitivity import target_jacobian
 from twin.parameters import Parameter, ParameterSet
@@ -157,7 +157,7 @@ def sensitivities(
     pset = ParameterSet(plist, mech.model)
     zero = np.zeros(len(pset))
     # the poses in chunks, side by side in worker processes on a long run (each pose's
-    # Jacobian is that of one process, bit for bit: calib.diagnosis.parallel)
+    # Jacobian is that of one process, bit for bit: common.worker_processes)
     rows = 3 * len(model.nominal.target_names) * len(qpos)
     workers = worker_count(rows, len(qpos))
     chunks = np.array_split(np.arange(len(qpos)), max(1, min(len(qpos), 4 * workers)))

@@ -21,9 +21,9 @@ import numpy as np
 from calib.diagnosis.candidate import Candidate
 from calib.diagnosis.context import Context
 from calib.diagnosis.fit import Evaluation, evaluate, shared_bases
-from calib.diagnosis.parallel import Progress, map_in_order, worker_count
 from calib.diagnosis.problem import SCHEMES, Problem
 from calib.diagnosis.verdict import improvement, refusal
+from common.worker_processes import Progress, map_in_order, worker_count
 
 # (evaluation, its candidates) -> the test set's 3D error per reading (m), None without one
 TestErrors = Callable[[Evaluation, list[Candidate]], "np.ndarray | None"]

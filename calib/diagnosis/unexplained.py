@@ -15,8 +15,8 @@ import numpy as np
 from calib.analysis.rank_structure import rank_correlations
 from calib.analysis.spearman import spearman
 from calib.diagnosis.context import Context
-from calib.diagnosis.parallel import Progress, map_in_order, worker_count
 from calib.diagnosis.problem import Problem
+from common.worker_processes import Progress, map_in_order, worker_count
 from twin.rotations import rotvec_from_matrix
 
 BANDWIDTHS = (0.15, 0.3, 0.6, 1.2, 2.5)
@@ -156,7 +156,7 @@ def kernel_heldout(
     """Per-pose held-out SSE of geometry + the kernel correction over each group's pose
     variables (``groups``: name -> (N, d)), per fold scheme. Every (group, scheme, fold) is
     its own fit, evaluated side by side in worker processes on a long run (the numbers of
-    one process, bit for bit: calib.diagnosis.parallel)."""
+    one process, bit for bit: common.worker_processes)."""
     tasks = [
         (group, scheme, f)
         for group in groups

@@ -1,15 +1,16 @@
-"""The diagnosis's candidates evaluated side by side in worker processes, and its progress line.
+"""Independent tasks evaluated side by side in worker processes, and a progress line.
 
-Each candidate's nested cross-validation is a function of the problem, the context and the
-folds alone; a worker (a fork of this process: it reads the problem, the candidates and the
-projection bases the parent computed, without copying them) evaluates whole candidates, one
-at a time, with one BLAS thread, and the results come back in the candidates' order. A
-candidate's numbers are therefore those of the serial run, whatever the number of workers.
+A task is a function of what the parent process holds (for the diagnosis: a candidate's
+nested cross-validation, a kernel correction of one fold, a cross-validation fold of the
+residual correction, the Jacobians of a chunk of poses); a worker (a fork of this process: it
+reads what the parent computed, without copying it) evaluates whole tasks, one at a time,
+with the parent's BLAS threads, and the results come back in the tasks' order. A task's
+numbers are therefore those of the serial run, whatever the number of workers.
 
 Workers: ``PKM_DIAGNOSIS_WORKERS`` when set (1: in this process), else the machine's cores
 for a long run (at least ``PARALLEL_MIN_ROWS`` residual rows), else this process. Without
 ``fork`` (not Linux/macOS) or inside a worker (a daemon process cannot have children) the
-candidates run here.
+tasks run here.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 ENV_WORKERS = "PKM_DIAGNOSIS_WORKERS"
-# fewer residual rows: the candidates take about a second or less in all, not worth a fork
+# fewer residual rows: the diagnosis's tasks take about a second or less in all, not worth a fork
 PARALLEL_MIN_ROWS = 20_000
 PROGRESS_AFTER_S = 5.0  # a progress line only once the candidates have taken this long
 
