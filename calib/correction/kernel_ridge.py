@@ -164,33 +164,37 @@ def cross_validate(
     z = (x - mean) / scale
     d = z.shape[1]
     n_l, n_r = len(length_scales), len(ratios)
-    folds = np.unique(labels)
-    tasks = [(f, i) for f in folds for i in range(n_l)]
-
-    def one(k: int) -> tuple[np.ndarray, np.ndarray]:
-        """(distance, predictions (n_r, poses, R)) of fold ``f``'s poses at length scale i."""
-        f, i = tasks[k]
+    pred = np.zeros((n_l, n_r, *y.shape))
+    distance = np.zeros(len(z))
+    # per fold: its poses, its training poses' features and targets and their squared
+    # distances (the held-out poses' distances, poses x training poses, are each task's own:
+    # one fold's at a time in memory)
+    fold_data = []
+    for f in np.unique(labels):
         test = labels == f
         tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)), CV_TRAINING_POSES)]
-        zt, yt = z[tr_idx], y[tr_idx]
-        d2_tt, d2_vt = sq_dist(zt, zt), sq_dist(z[test], zt)
+        zt = z[tr_idx]
+        distance[test] = np.sqrt(np.min(sq_dist(z[test], zt), axis=1))
+        fold_data.append((test, zt, y[tr_idx], sq_dist(zt, zt)))
+    tasks = [(k, i) for k in range(len(fold_data)) for i in range(n_l)]
+
+    def one(t: int) -> np.ndarray:
+        """Predictions (n_r, poses, R) of a fold's poses at one length scale."""
+        k, i = tasks[t]
+        test, zt, yt, d2_tt = fold_data[k]
+        d2_vt = sq_dist(z[test], zt)
         ls = length_scales[i]
         w, u = np.linalg.eigh(np.exp(-0.5 * d2_tt / (ls**2 * d)))
         w = np.clip(w, 0.0, None)
         uy = u.T @ yt
         kv = np.exp(-0.5 * d2_vt / (ls**2 * d)) @ u
-        held = np.array([kv @ (uy / (w + r)[:, None]) for r in ratios])
-        return np.sqrt(np.min(d2_vt, axis=1)), held
+        return np.array([kv @ (uy / (w + r)[:, None]) for r in ratios])
 
-    pred = np.zeros((n_l, n_r, *y.shape))
-    distance = np.zeros(len(z))
     # each (fold, length scale) its own eigendecomposition: side by side in worker processes
     # on a long run, the numbers of one process bit for bit (common.worker_processes)
     workers = worker_count(y.size, len(tasks))
-    for (f, i), (dist, held) in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
-        test = labels == f
-        distance[test] = dist
-        pred[i][:, test] = held
+    for (k, i), held in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
+        pred[i][:, fold_data[k][0]] = held
     sse = np.sum((y[None, None] - pred) ** 2, axis=(2, 3))
     i, j = np.unravel_index(int(np.argmin(sse)), sse.shape)
     return CrossValidation(sse, length_scales[i], ratios[j], y, y - pred[i, j], distance)
