@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from calib.correction import correction_in_file
-from calib.data import CalibrationResult, read_dataset
+from calib.data import CalibrationResult, Dataset, read_dataset, require_model
 from calib.fit import (
     EXIT_BAD_INPUT,
     EXIT_OK,
@@ -85,7 +85,9 @@ def failed(exc: FitFailed) -> int:
     return EXIT_POOR_FIT if exc.poor_data else EXIT_BAD_INPUT
 
 
-def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
+def run_fit(args: argparse.Namespace, dataset: Dataset | None = None) -> CalibrationRun | int:
+    """Fit the ``--model``/``--errors`` error model to ``--data`` (``dataset``: that file,
+    if the command has read it already), with ``--with`` a diagnosis's effect added."""
     model = model_from_files(args.model, args.errors)
     effect = getattr(args, "with_effect", None)
     diagnosis = None
@@ -94,7 +96,10 @@ def run_fit(args: argparse.Namespace) -> CalibrationRun | int:
         block = load_effect(effect, model, allow_empty=correction is not None)
         extended_model(model, block["added_parameters"], effect)  # its entries checked
         diagnosis = json.loads(Path(effect).read_text(encoding="utf-8"))
-    dataset = read_dataset(args.data, expected_model=model.nominal.name)
+    if dataset is None:
+        dataset = read_dataset(args.data, expected_model=model.nominal.name)
+    else:
+        require_model(args.data, dataset.model, model.nominal.name)
     options = fit_options(args)
     try:
         if diagnosis is not None:

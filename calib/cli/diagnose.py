@@ -110,7 +110,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from calib.diagnosis import diagnose
 
     held, accuracy, data = _checked_inputs(args)  # before the fit: a wrong input costs no fit
-    run = run_fit(args)
+    run = run_fit(args, data)
     if isinstance(run, int):
         return run
     print(run.selection)

@@ -13,6 +13,7 @@ __all__, __getattr__, __dir__ = face(
         ),
         "dataset_io": (
             "read_dataset",
+            "require_model",
             "write_dataset",
         ),
         "desired_poses": (

@@ -328,6 +328,19 @@ def _n_repeats(path: Path, poses: dict[int, _Pose], targets: list[str]) -> int:
     return n_rep
 
 
+def require_model(csv_path: str | os.PathLike[str], model: str, expected_model: str) -> None:
+    """Raise DatasetError unless the dataset at ``csv_path``, of ``model`` (its sidecar's),
+    is of ``expected_model``: what :func:`read_dataset` checks of a file read before the
+    model was known."""
+    if model != expected_model:
+        raise DatasetError(
+            f"{sidecar_path(Path(csv_path))}: model is {model!r}, expected {expected_model!r} "
+            "(the model's own name: a model made by pkm-calib from-urdf takes the URDF's robot "
+            f"name; regenerate it with --name {model}, or correct the sidecar's "
+            "'model' if the readings are of this machine)"
+        )
+
+
 def read_csv_dataset(
     csv_path: str | os.PathLike[str], expected_model: str | None = None
 ) -> Dataset:
@@ -336,13 +349,8 @@ def read_csv_dataset(
     if not path.is_file():
         raise DatasetError(f"{path}: dataset CSV file not found")
     side = _read_sidecar(sidecar_path(path))
-    if expected_model is not None and side["model"] != expected_model:
-        raise DatasetError(
-            f"{sidecar_path(path)}: model is {side['model']!r}, expected {expected_model!r} "
-            "(the model's own name: a model made by pkm-calib from-urdf takes the URDF's robot "
-            f"name; regenerate it with --name {side['model']}, or correct the sidecar's "
-            "'model' if the readings are of this machine)"
-        )
+    if expected_model is not None:
+        require_model(path, side["model"], expected_model)
     acts, targets = list(side["actuators"]), list(side["targets"])
     reader = csv.reader(io.StringIO(_read_text(path, "dataset CSV"), newline=""))
     try:
