@@ -33,8 +33,12 @@ def main() -> None:
         else:
             sys.argv = [target, *args]
             runpy.run_module(target, run_name="__main__", alter_sys=True)
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except SystemExit as exc:  # as the interpreter ends on it: a message is printed, exit 1
+        if isinstance(exc.code, int) or exc.code is None:
+            code = exc.code or 0
+        else:
+            print(exc.code, file=sys.stderr)
+            code = 1
     finally:
         kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         Path(out).write_text(str(max(_own_peak_kb(), kids)))

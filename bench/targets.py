@@ -3,59 +3,51 @@ is). A target whose number the run did not measure is left out of ``meets_target
 
 from __future__ import annotations
 
-_SPEED = "identify's speedup vs scipy least_squares"
-_SCALE = "a campaign of"
+Target = tuple[str, float, str]
 
-TARGETS: dict[str, tuple[str, float, str]] = {
-    "machines.hexapod.fk_batch_poses_per_s": (">=", 50000, "batched FK poses/s, hexapod"),
-    **{
-        f"machines.{m}.identify_speedup_vs_scipy_fd": (">=", 15, f"{_SPEED} (FD Jacobian), {m}")
-        for m in ("hexapod", "polisher", "arm")
-    },
-    **{
+
+def _machine_targets(m: str) -> dict[str, Target]:
+    """identify against scipy's least_squares on machine ``m`` of bench.machines."""
+    speed = "identify's speedup vs scipy least_squares"
+    return {
+        f"machines.{m}.identify_speedup_vs_scipy_fd": (">=", 15, f"{speed} (FD Jacobian), {m}"),
         f"machines.{m}.identify_speedup_vs_scipy_analytic": (
             ">=",
             1,
-            f"{_SPEED} (our analytic Jacobian), {m}",
-        )
-        for m in ("hexapod", "polisher", "arm")
-    },
+            f"{speed} (our analytic Jacobian), {m}",
+        ),
+    }
+
+
+def _campaign_targets(m: str) -> dict[str, Target]:
+    """A campaign's time and memory on machine ``m`` of bench.scaling."""
+    at = f"scaling.{m}.by_readings"
+    return {
+        f"scaling.{m}.ratios.identify_10k_over_1k.time": (
+            "<=",
+            15,
+            f"identify's time, 10k over 1k readings, {m}",
+        ),
+        f"{at}.100000.identify.peak_mb": ("<=", 4096, f"identify's peak MB, 100k readings, {m}"),
+        f"{at}.10000.identify.peak_mb": ("<=", 1536, f"identify's peak MB, 10k readings, {m}"),
+        f"{at}.10000.diagnose.peak_mb": ("<=", 2048, f"diagnose's peak MB, 10k readings, {m}"),
+        f"scaling.{m}.diagnose_over_identify.10000": (
+            "<=",
+            6,
+            f"diagnose's time over identify's, 10k readings, {m}",
+        ),
+    }
+
+
+TARGETS: dict[str, Target] = {
+    "machines.hexapod.fk_batch_poses_per_s": (">=", 50000, "batched FK poses/s, hexapod"),
+    **{k: t for m in ("hexapod", "polisher", "arm") for k, t in _machine_targets(m).items()},
     "command_line.identify_over_import": (
         "<=",
         2,
         "identify on a 20-pose arm over the bare import of the command line",
     ),
-    **{
-        key: target
-        for m in ("arm", "hexapod")
-        for key, target in {
-            f"scaling.{m}.ratios.identify_10k_over_1k.time": (
-                "<=",
-                15,
-                f"identify's time, 10k over 1k readings, {m}",
-            ),
-            f"scaling.{m}.by_readings.100000.identify.peak_mb": (
-                "<=",
-                4096,
-                f"identify's peak MB, {_SCALE} 100k readings, {m}",
-            ),
-            f"scaling.{m}.by_readings.10000.identify.peak_mb": (
-                "<=",
-                1536,
-                f"identify's peak MB, {_SCALE} 10k readings, {m}",
-            ),
-            f"scaling.{m}.by_readings.10000.diagnose.peak_mb": (
-                "<=",
-                2048,
-                f"diagnose's peak MB, {_SCALE} 10k readings, {m}",
-            ),
-            f"scaling.{m}.diagnose_over_identify.10000": (
-                "<=",
-                6,
-                f"diagnose's time over identify's, {_SCALE} 10k readings, {m}",
-            ),
-        }.items()
-    },
+    **{k: t for m in ("arm", "hexapod") for k, t in _campaign_targets(m).items()},
     "scenario_optimal_poses_s": ("<=", 90, "optimal_poses (s)"),
     "scenario_liu_vs_ols_no_figures_s": ("<=", 3, "liu_vs_ols without figures (s)"),
     "scenario_liu_vs_ols_s": ("<=", 6, "liu_vs_ols with figures (s)"),
