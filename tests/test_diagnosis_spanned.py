@@ -30,4 +30,5 @@ def test_a_column_the_geometry_spans_stays_at_zero():
     alone = fit(prob, [seen[:, :, None]], poses)
     assert both.theta[0] == 0.0
     np.testing.assert_allclose(both.theta[1], 2e-3, rtol=1e-3)
-    np.testing.assert_array_equal(both.theta[1:], alone.theta)
+    # the same fit to round-off (one column or two go through different BLAS paths)
+    np.testing.assert_allclose(both.theta[1:], alone.theta, rtol=1e-12)
