@@ -96,10 +96,11 @@ def _smooth_all(
             own = self_index[lo:hi]
             rows = np.flatnonzero(own >= 0)
             own = own[rows]
+        half = d2[: hi - lo]
+        np.multiply(half, -0.5, out=half)  # once for every bandwidth
         for j, h in enumerate(hs):
             w = w[: hi - lo]
-            np.multiply(d2[: hi - lo], -0.5, out=w)  # exp(-0.5 d2 / h^2), in place
-            np.divide(w, h**2, out=w)
+            np.divide(half, h**2, out=w)  # exp(-0.5 d2 / h^2)
             np.exp(w, out=w)
             if self_index is not None:
                 w[rows, own] = 0.0
