@@ -50,8 +50,11 @@ def sq_dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Squared Euclidean distances (len(a), len(b)), summed coordinate by coordinate (no
     a.b^T product: the same digits whatever the BLAS)."""
     d2 = np.zeros((len(a), len(b)))
+    work = np.empty_like(d2)  # each coordinate's squared differences, in place
     for j in range(a.shape[1]):
-        d2 += (a[:, j, None] - b[None, :, j]) ** 2
+        np.subtract.outer(a[:, j], b[:, j], out=work)
+        np.multiply(work, work, out=work)
+        d2 += work
     return d2
 
 
@@ -167,27 +170,35 @@ def cross_validate(
     pred = np.zeros((n_l, n_r, *y.shape))
     distance = np.zeros(len(z))
     # per fold: its poses, its training poses' features and targets and their squared
-    # distances (the held-out poses' distances, poses x training poses, are each task's own:
-    # one fold's at a time in memory)
+    # distances (the held-out poses' distances, poses x training poses, are made by the
+    # process that evaluates the fold, below)
     fold_data = []
     for f in np.unique(labels):
         test = labels == f
         tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)), CV_TRAINING_POSES)]
         zt = z[tr_idx]
         distance[test] = np.sqrt(np.min(sq_dist(z[test], zt), axis=1))
-        fold_data.append((test, zt, y[tr_idx], sq_dist(zt, zt)))
+        # -0.5 d2 of the training poses: every length scale's kernel is exp(this / (l^2 d))
+        fold_data.append((test, zt, y[tr_idx], np.multiply(sq_dist(zt, zt), -0.5)))
     tasks = [(k, i) for k in range(len(fold_data)) for i in range(n_l)]
+    # -0.5 d2 of one fold's held-out poses to its training poses, kept by the process that
+    # evaluates its length scales (each worker its own: one fold's at a time in memory)
+    held_half: dict[int, np.ndarray] = {}
 
     def one(t: int) -> np.ndarray:
         """Predictions (n_r, poses, R) of a fold's poses at one length scale."""
         k, i = tasks[t]
-        test, zt, yt, d2_tt = fold_data[k]
-        d2_vt = sq_dist(z[test], zt)
-        ls = length_scales[i]
-        w, u = np.linalg.eigh(np.exp(-0.5 * d2_tt / (ls**2 * d)))
+        test, zt, yt, half_tt = fold_data[k]
+        if k not in held_half:
+            held_half.clear()
+            held_half[k] = np.multiply(sq_dist(z[test], zt), -0.5)
+        scale = length_scales[i] ** 2 * d
+        w, u = np.linalg.eigh(np.exp(half_tt / scale))
         w = np.clip(w, 0.0, None)
         uy = u.T @ yt
-        kv = np.exp(-0.5 * d2_vt / (ls**2 * d)) @ u
+        kv = np.divide(held_half[k], scale)
+        np.exp(kv, out=kv)
+        kv = kv @ u
         return np.array([kv @ (uy / (w + r)[:, None]) for r in ratios])
 
     # each (fold, length scale) its own eigendecomposition: side by side in worker processes
@@ -195,6 +206,7 @@ def cross_validate(
     workers = worker_count(y.size, len(tasks))
     for (k, i), held in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
         pred[i][:, fold_data[k][0]] = held
+    held_half.clear()
     sse = np.sum((y[None, None] - pred) ** 2, axis=(2, 3))
     i, j = np.unravel_index(int(np.argmin(sse)), sse.shape)
     return CrossValidation(sse, length_scales[i], ratios[j], y, y - pred[i, j], distance)
