@@ -11,16 +11,22 @@ Workers: ``PKM_DIAGNOSIS_WORKERS`` when set (1: in this process), else the machi
 for a long run (at least ``PARALLEL_MIN_ROWS`` residual rows), else this process. Without
 ``fork`` (not Linux/macOS) or inside a worker (a daemon process cannot have children) the
 tasks run here.
+
+A task whose result is large (a projection basis of thousands of rows) writes it into a
+:func:`shared_array` the parent made before the fork, instead of returning it through a pipe.
 """
 
 from __future__ import annotations
 
+import mmap
 import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
+
+import numpy as np
 
 ENV_WORKERS = "PKM_DIAGNOSIS_WORKERS"
 # fewer residual rows: the diagnosis's tasks take about a second or less in all, not worth a fork
@@ -50,6 +56,14 @@ def worker_count(n_rows: int, n_tasks: int) -> int:
         and not multiprocessing.current_process().daemon
     )
     return max(1, min(wanted, n_tasks)) if usable else 1
+
+
+def shared_array(shape: tuple[int, ...]) -> np.ndarray:
+    """A float array (zeros) in an anonymous shared mapping: what a forked worker writes into
+    it, this process reads. It lives as long as an array refers to it."""
+    size = int(np.prod(shape))
+    buf = mmap.mmap(-1, max(size, 1) * 8)
+    return np.frombuffer(buf, dtype=float, count=size).reshape(shape)
 
 
 def map_in_order(fn: Callable[[int], Any], n_tasks: int, workers: int) -> Iterator[Any]:

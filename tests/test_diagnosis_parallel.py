@@ -127,3 +127,27 @@ def test_kernel_corrections_in_two_processes_are_those_of_one(monkeypatch):
     np.testing.assert_array_equal(cv_1.distance, cv_2.distance)
     assert (cv_1.length_scale, cv_1.ratio) == (cv_2.length_scale, cv_2.ratio)
     assert np.all(cv_1.distance > 0)  # every pose away from its fold's training poses
+
+
+def test_bases_made_in_two_processes_are_those_of_one():
+    """Problem.fill in two workers (into shared memory) gives the bases and projected residuals
+    :meth:`Problem.basis` makes here: the same numbers and the same memory layout (a BLAS
+    product's order of sums follows the layout, so a row-major copy of numpy's column-major Q
+    changed a held-out RMS in its last bit)."""
+    prob, ctx, _ = _problem()
+    sets = [fold_labels(ctx.time, 5, s) != f for s in SCHEMES for f in range(5)]
+    sets.append(sets[0])  # asked twice: made once
+    here, there = Problem(prob.r, prob.geo), Problem(prob.r, prob.geo)
+    there.fill(sets, 2)
+    assert len(there._cache) == 2 * 10
+    for poses in sets:
+        for a, b in zip(here.basis(poses), there.basis(poses), strict=True):
+            np.testing.assert_array_equal(a, b)
+            assert a.strides == b.strides
+        for a, b in zip(
+            here.projected_residual(poses), there.projected_residual(poses), strict=True
+        ):
+            np.testing.assert_array_equal(a, b)
+    rt, rp = there.projected_residual(sets[0])
+    q, _ = there.basis(sets[0])
+    np.testing.assert_allclose(q.T @ rp, 0.0, atol=1e-12 * np.linalg.norm(rt))

@@ -98,15 +98,18 @@ def evaluate(
     )
 
 
-def shared_bases(prob: Problem, ctx: Context, folds: dict[str, np.ndarray]) -> None:
+def shared_bases(
+    prob: Problem, ctx: Context, folds: dict[str, np.ndarray], workers: int = 1
+) -> None:
     """The projection bases and residuals every candidate's :func:`evaluate` reads, into
     ``prob``'s cache: of each outer training set, all poses, and their inner folds' training
-    sets (the same numbers as when a candidate's evaluation first asks for them)."""
-    sets = [labels != f for labels in folds.values() for f in range(int(labels.max()) + 1)]
-    for train in [*sets, np.ones(ctx.n_poses, bool)]:
-        prob.projected_residual(train)
-        for inner, _ in inner_folds(ctx, train):
-            prob.projected_residual(inner)
+    sets (the same numbers as when a candidate's evaluation first asks for them), made by
+    ``workers`` processes."""
+    outer = [labels != f for labels in folds.values() for f in range(int(labels.max()) + 1)]
+    sets = []
+    for train in [*outer, np.ones(ctx.n_poses, bool)]:
+        sets += [train, *(inner for inner, _ in inner_folds(ctx, train))]
+    prob.fill(sets, workers)
 
 
 @dataclass(frozen=True)

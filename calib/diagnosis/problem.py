@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common.worker_processes import map_in_order, shared_array
+
 SCHEMES = ("blocked", "random")
 RCOND = 1e-10
 # a candidate's column of which the geometry's projection leaves less than this share of its
@@ -59,6 +61,10 @@ def orth_and_pinv(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return q, np.matmul(vt.T, np.multiply(inv[:, None], u.T))
 
 
+def _order(a: np.ndarray) -> str:
+    return "F" if a.flags.f_contiguous and not a.flags.c_contiguous else "C"
+
+
 @dataclass
 class Problem:
     """The geometric residual and columns, with cached projection bases per training set."""
@@ -88,12 +94,53 @@ class Problem:
         """(Q, G^+) of the geometric columns of these poses."""
         key = np.asarray(poses, bool).tobytes()
         if key not in self._cache:
-            g, _ = self.rows(poses)
-            scale = np.linalg.norm(g, axis=0)
-            scale[scale == 0] = 1.0
-            q, gplus = orth_and_pinv(g / scale)
-            self._cache[key] = (q, gplus / scale[:, None])
+            self._cache[key] = self._made_basis(poses)
         return self._cache[key]
+
+    def _made_basis(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        g, _ = self.rows(poses)
+        scale = np.linalg.norm(g, axis=0)
+        scale[scale == 0] = 1.0
+        q, gplus = orth_and_pinv(g / scale)
+        return q, gplus / scale[:, None]
+
+    def fill(self, sets: list[np.ndarray], workers: int) -> None:
+        """The bases and projected residuals of ``sets`` (pose masks) into the cache, each set
+        a task: with ``workers`` > 1 made side by side in forked workers, which write them
+        into shared memory (the arithmetic of :meth:`basis` and :meth:`projected_residual`,
+        so the same numbers)."""
+        todo, seen = [], set()
+        for poses in sets:
+            key = np.asarray(poses, bool).tobytes()
+            if key not in self._cache and key not in seen:
+                seen.add(key)
+                todo.append(np.asarray(poses, bool))
+        if workers <= 1 or len(todo) <= 1:
+            for poses in todo:
+                self.projected_residual(poses)
+            return
+        p = self.geo.shape[2]
+        # per set: room for Q (rows x at most p), G+ (p x rows) and the projected residual
+        slots = [shared_array((3, int(poses.sum()) * self.r.shape[1] * p)) for poses in todo]
+
+        def one(i: int) -> tuple[int, str, str]:
+            q, gplus = self._made_basis(todo[i])
+            rt = self.residual_rows(todo[i])
+            rp = rt - q @ (q.T @ rt)
+            for k, a in enumerate((q, gplus, rp)):
+                slots[i][k, : a.size] = a.ravel(order="K")  # in its own memory order
+            return q.shape[1], _order(q), _order(gplus)
+
+        for poses, slot, (rank, q_order, g_order) in zip(
+            todo, slots, map_in_order(one, len(todo), workers), strict=True
+        ):
+            n = int(poses.sum()) * self.r.shape[1]
+            # views of the shared memory in the layout basis() makes (numpy's SVD gives a
+            # column-major Q): a BLAS product's order of sums, so its last bits, follow it
+            q = slot[0, : n * rank].reshape((n, rank), order=q_order)
+            gplus = slot[1, : p * n].reshape((p, n), order=g_order)
+            self._cache[poses.tobytes()] = (q, gplus)
+            self._cache[("rp", poses.tobytes())] = (self.residual_rows(poses), slot[2, :n])
 
 
 @dataclass(frozen=True)

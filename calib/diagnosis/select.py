@@ -53,11 +53,11 @@ def select_effects(
 ) -> Selection:
     """``noise_ms``: the held-out mean square per row (m^2) that an effect must gain beyond
     when the residual is what the noise explains (None: the residual exceeds the noise)."""
+    workers = worker_count(prob.r.size, len(cands))
+    if workers > 1:  # computed once here (side by side), read by every worker
+        shared_bases(prob, ctx, fold_sets, workers)
     base = evaluate(prob, ctx, fold_sets, [], None, n_rows)
     singles, refused = {}, {}
-    workers = worker_count(prob.r.size, len(cands))
-    if workers > 1:  # computed once here, read by every worker
-        shared_bases(prob, ctx, fold_sets)
 
     def alone(i: int) -> tuple[Evaluation, str]:
         ev = evaluate(prob, ctx, fold_sets, [cands[i]], None, n_rows)
