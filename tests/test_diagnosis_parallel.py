@@ -12,6 +12,7 @@ import pytest
 from diagnosis_support import synthetic_context
 
 from calib.correction.kernel_ridge import cross_validate
+from calib.diagnosis import problem as problem_module
 from calib.diagnosis.candidates import library
 from calib.diagnosis.context import Context
 from calib.diagnosis.problem import SCHEMES, Problem, fold_labels
@@ -129,25 +130,57 @@ def test_kernel_corrections_in_two_processes_are_those_of_one(monkeypatch):
     assert np.all(cv_1.distance > 0)  # every pose away from its fold's training poses
 
 
-def test_bases_made_in_two_processes_are_those_of_one():
-    """Problem.fill in two workers (into shared memory) gives the bases and projected residuals
-    :meth:`Problem.basis` makes here: the same numbers and the same memory layout (a BLAS
-    product's order of sums follows the layout, so a row-major copy of numpy's column-major Q
-    changed a held-out RMS in its last bit)."""
+def _same_bases(here: Problem, there: Problem, sets: list[np.ndarray]) -> None:
+    for poses in sets:
+        for a, b in (
+            (here.basis(poses), there.basis(poses)),
+            (here.pinv(poses), there.pinv(poses)),
+            *zip(here.projected_residual(poses), there.projected_residual(poses), strict=True),
+        ):
+            np.testing.assert_array_equal(a, b)
+            assert a.strides == b.strides
+
+
+@pytest.mark.parametrize("budget", [1 << 30, 6_000, 0])
+def test_bases_made_in_two_processes_are_those_of_one(monkeypatch, budget):
+    """Problem.fill in two workers (into shared memory) gives the bases, pseudo-inverses and
+    projected residuals that Problem.basis makes here: the same numbers and the same memory
+    layout (a BLAS product's order of sums follows the layout, so a row-major copy of numpy's
+    column-major Q changed a held-out RMS in its last bit), whether the pseudo-inverses are
+    kept (all, the first two sets', none) or made again when asked."""
+    monkeypatch.setattr(problem_module, "PINV_BUDGET", budget)
     prob, ctx, _ = _problem()
     sets = [fold_labels(ctx.time, 5, s) != f for s in SCHEMES for f in range(5)]
     sets.append(sets[0])  # asked twice: made once
-    here, there = Problem(prob.r, prob.geo), Problem(prob.r, prob.geo)
-    there.fill(sets, 2)
-    assert len(there._cache) == 2 * 10
-    for poses in sets:
-        for a, b in zip(here.basis(poses), there.basis(poses), strict=True):
-            np.testing.assert_array_equal(a, b)
-            assert a.strides == b.strides
-        for a, b in zip(
-            here.projected_residual(poses), there.projected_residual(poses), strict=True
-        ):
-            np.testing.assert_array_equal(a, b)
-    rt, rp = there.projected_residual(sets[0])
-    q, _ = there.basis(sets[0])
-    np.testing.assert_allclose(q.T @ rp, 0.0, atol=1e-12 * np.linalg.norm(rt))
+    deficient = prob.geo.copy()
+    deficient[:, :, 3] = deficient[:, :, 2]  # two equal columns: Q is a part of U
+    for geo in (prob.geo, deficient):
+        here, there = Problem(prob.r, geo), Problem(prob.r, geo)
+        there.fill(sets, 2)
+        assert len(there._cache) == 2 * 10
+        rows_each = 96 * 3 * T * P * 8  # 4 of 5 folds' poses
+        assert there._pinv_bytes == min(budget // rows_each, 10) * rows_each
+        kept = [there._cache[s.tobytes()].kept_pinv is not None for s in sets[:10]]
+        assert kept == [i < there._pinv_bytes // rows_each for i in range(10)]
+        _same_bases(here, there, sets)
+        rt, rp = there.projected_residual(sets[0])
+        q = there.basis(sets[0])
+        assert q.shape[1] == (P if geo is prob.geo else P - 1)
+        np.testing.assert_allclose(q.T @ rp, 0.0, atol=1e-12 * np.linalg.norm(rt))
+
+
+def test_a_pseudo_inverse_made_again_is_the_kept_one(monkeypatch):
+    """Beyond the budget G+ is made from the SVD's factors each time a fit asks: the numbers
+    of the kept one, a rank-deficient geometry included (Q then a part of U)."""
+    prob, ctx, _ = _problem()
+    geo = prob.geo.copy()
+    geo[:, :, 3] = geo[:, :, 2]  # two equal columns: rank P - 1
+    sets = [fold_labels(ctx.time, 5, "random") != f for f in range(5)]
+    kept = Problem(prob.r, geo)
+    kept.fill(sets, 1)
+    monkeypatch.setattr(problem_module, "PINV_BUDGET", 0)
+    made = Problem(prob.r, geo)
+    _same_bases(kept, made, sets)
+    assert made.basis(sets[0]).shape[1] == P - 1
+    assert all(made._cache[s.tobytes()].kept_pinv is None for s in sets)
+    assert all(kept._cache[s.tobytes()].kept_pinv is not None for s in sets)

@@ -10,18 +10,11 @@ import numpy as np
 import pytest
 from diagnosis_support import synthetic_context
 
+from calib.diagnosis.basis import RCOND, _orth, orth_and_pinv
 from calib.diagnosis.candidate import PoseRows
 from calib.diagnosis.candidates import library
 from calib.diagnosis.gravity import GravityLoads
-from calib.diagnosis.problem import (
-    RCOND,
-    Problem,
-    _orth,
-    fit,
-    fold_labels,
-    heldout_sse,
-    orth_and_pinv,
-)
+from calib.diagnosis.problem import Problem, fit, fold_labels, heldout_sse
 from calib.diagnosis.shape_scan import (
     INNER_FOLDS,
     _explained,

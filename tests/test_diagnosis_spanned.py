@@ -22,7 +22,7 @@ def test_a_column_the_geometry_spans_stays_at_zero():
     r = 2e-3 * seen + geo @ rng.normal(0, 1e-3, p) + rng.normal(0, 1e-6, (n, rows))
     prob = Problem(r, geo)
     poses = np.ones(n, bool)
-    q, _ = prob.basis(poses)
+    q = prob.basis(poses)
     left = spanned.reshape(-1) - q @ (q.T @ spanned.reshape(-1))
     # what the projection leaves is round-off, far below the column, above the old RCOND test
     assert 1e-13 < np.linalg.norm(left) / np.linalg.norm(spanned) < SPANNED

@@ -19,9 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.diagnosis.basis import RCOND
 from calib.diagnosis.candidate import Candidate
 from calib.diagnosis.context import Context
-from calib.diagnosis.problem import RCOND, Fit, Problem, _flat, fit, heldout_sse
+from calib.diagnosis.problem import Fit, Problem, _flat, fit, heldout_sse
 from calib.diagnosis.shape_scan import choose_shape, inner_folds, rss_over_grid
 
 
@@ -127,7 +128,7 @@ def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluat
     n = ctx.n_poses
     everything = np.ones(n, bool)
     xs = [c.design(ctx, s) for c, s in zip(cands, ev.shapes, strict=True)]
-    q, _ = prob.basis(everything)
+    q = prob.basis(everything)
     _, rt = prob.rows(everything)
     xt = _flat(xs, everything).reshape(len(rt), -1)
     xp = xt - q @ (q.T @ xt)
@@ -179,7 +180,7 @@ def undetermined(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evalua
     it) is not counted here: it keeps value 0 without a standard error."""
     everything = np.ones(ctx.n_poses, bool)
     xs = [c.design(ctx, s) for c, s in zip(cands, ev.shapes, strict=True)]
-    q, _ = prob.basis(everything)
+    q = prob.basis(everything)
     _, rt = prob.rows(everything)
     xt = _flat(xs, everything).reshape(len(rt), -1)
     norms = np.linalg.norm(xt, axis=0)

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from calib.diagnosis.basis import PINV_BUDGET, RCOND, Basis, make_basis
 from common.worker_processes import map_in_order, shared_array
 
 SCHEMES = ("blocked", "random")
-RCOND = 1e-10
 # a candidate's column of which the geometry's projection leaves less than this share of its
 # own norm is one the geometry spans: what is left is the round-off of the projection (the
 # basis of ill-conditioned geometric columns holds their span to about eps x their condition
@@ -39,29 +39,10 @@ def fold_labels(time: np.ndarray, folds: int, scheme: str, seed: int = 0) -> np.
     return out
 
 
-def _orth(a: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of the column space of ``a`` (rank-revealing SVD)."""
-    if a.shape[1] == 0:
-        return np.zeros((a.shape[0], 0))
-    u, s, _ = np.linalg.svd(a, full_matrices=False)
-    keep = s > RCOND * max(s[0], 1e-300)
-    return u[:, keep]
-
-
-def orth_and_pinv(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``_orth(a)`` and ``np.linalg.pinv(a, rcond=RCOND)`` from one SVD (numpy's pinv
-    arithmetic step for step, so the same numbers)."""
-    if a.size == 0:
-        return _orth(a), np.linalg.pinv(a, rcond=RCOND)
-    u, s, vt = np.linalg.svd(a, full_matrices=False)
-    q = u[:, s > RCOND * max(s[0], 1e-300)]
-    large = s > RCOND * np.max(s)
-    inv = np.divide(1, s, where=large, out=s.copy())
-    inv[~large] = 0
-    return q, np.matmul(vt.T, np.multiply(inv[:, None], u.T))
-
-
-def _order(a: np.ndarray) -> str:
+def _order(a: np.ndarray | None) -> str | None:
+    """The memory order of ``a`` (None for none)."""
+    if a is None:
+        return None
     return "F" if a.flags.f_contiguous and not a.flags.c_contiguous else "C"
 
 
@@ -72,6 +53,7 @@ class Problem:
     r: np.ndarray  # (N, R), rejected rows zero
     geo: np.ndarray  # (N, R, p)
     _cache: dict = field(default_factory=dict)
+    _pinv_bytes: int = 0  # of the pseudo-inverses kept in the cache
 
     def rows(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g = self.geo[poses].reshape(-1, self.geo.shape[2])
@@ -85,30 +67,40 @@ class Problem:
         """(r, r - Q Q^T r) of these poses' residual rows, cached with the basis."""
         key = ("rp", np.asarray(poses, bool).tobytes())
         if key not in self._cache:
-            q, _ = self.basis(poses)
+            q = self.basis(poses)
             rt = self.residual_rows(poses)
             self._cache[key] = (rt, rt - q @ (q.T @ rt))
         return self._cache[key]
 
-    def basis(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(Q, G^+) of the geometric columns of these poses."""
+    def basis(self, poses: np.ndarray) -> np.ndarray:
+        """Q, an orthonormal basis of the geometric columns of these poses."""
+        return self._basis(poses).q
+
+    def pinv(self, poses: np.ndarray) -> np.ndarray:
+        """G+, the pseudo-inverse of the geometric columns of these poses (kept within the
+        budget of calib.diagnosis.basis, else made now)."""
+        return self._basis(poses).pinv()
+
+    def _basis(self, poses: np.ndarray) -> Basis:
         key = np.asarray(poses, bool).tobytes()
         if key not in self._cache:
-            self._cache[key] = self._made_basis(poses)
+            g, _ = self.rows(poses)
+            self._cache[key] = make_basis(g, self._keeps_pinv(len(g)))
         return self._cache[key]
 
-    def _made_basis(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        g, _ = self.rows(poses)
-        scale = np.linalg.norm(g, axis=0)
-        scale[scale == 0] = 1.0
-        q, gplus = orth_and_pinv(g / scale)
-        return q, gplus / scale[:, None]
+    def _keeps_pinv(self, rows: int) -> bool:
+        """Whether the pseudo-inverse of a set of ``rows`` rows is kept (counted if so)."""
+        size = 8 * rows * self.geo.shape[2]
+        if self._pinv_bytes + size > PINV_BUDGET:
+            return False
+        self._pinv_bytes += size
+        return True
 
     def fill(self, sets: list[np.ndarray], workers: int) -> None:
         """The bases and projected residuals of ``sets`` (pose masks) into the cache, each set
-        a task: with ``workers`` > 1 made side by side in forked workers, which write them
-        into shared memory (the arithmetic of :meth:`basis` and :meth:`projected_residual`,
-        so the same numbers)."""
+        a task: with ``workers`` > 1 made side by side in forked workers, which write the
+        large arrays into shared memory (the arithmetic of :meth:`basis` and
+        :meth:`projected_residual`, so the same numbers)."""
         todo, seen = [], set()
         for poses in sets:
             key = np.asarray(poses, bool).tobytes()
@@ -120,26 +112,36 @@ class Problem:
                 self.projected_residual(poses)
             return
         p = self.geo.shape[2]
-        # per set: room for Q (rows x at most p), G+ (p x rows) and the projected residual
-        slots = [shared_array((3, int(poses.sum()) * self.r.shape[1] * p)) for poses in todo]
+        sizes = [int(poses.sum()) * self.r.shape[1] for poses in todo]
+        keeps = [self._keeps_pinv(n) for n in sizes]  # decided here, in the sets' order
+        # per set: room for Q, G+, the projected residual and U (only when Q lacks some of
+        # its columns); pages never written take no memory
+        slots = [shared_array((4, n * p)) for n in sizes]
 
-        def one(i: int) -> tuple[int, str, str]:
-            q, gplus = self._made_basis(todo[i])
-            rt = self.residual_rows(todo[i])
-            rp = rt - q @ (q.T @ rt)
-            for k, a in enumerate((q, gplus, rp)):
-                slots[i][k, : a.size] = a.ravel(order="K")  # in its own memory order
-            return q.shape[1], _order(q), _order(gplus)
+        def one(i: int) -> tuple:
+            g, rt = self.rows(todo[i])
+            b = make_basis(g, keeps[i])
+            rp = rt - b.q @ (b.q.T @ rt)
+            for k, a in enumerate((b.q, b.kept_pinv, rp, b.u)):
+                if a is not None:
+                    slots[i][k, : a.size] = a.ravel(order="K")  # in its own memory order
+            shapes = [None if a is None else (a.shape, _order(a)) for a in (b.q, b.kept_pinv, b.u)]
+            return shapes, b.vt, b.inv, b.scale
 
-        for poses, slot, (rank, q_order, g_order) in zip(
-            todo, slots, map_in_order(one, len(todo), workers), strict=True
+        for poses, n, slot, (shapes, vt, inv, scale) in zip(
+            todo, sizes, slots, map_in_order(one, len(todo), workers), strict=True
         ):
-            n = int(poses.sum()) * self.r.shape[1]
-            # views of the shared memory in the layout basis() makes (numpy's SVD gives a
-            # column-major Q): a BLAS product's order of sums, so its last bits, follow it
-            q = slot[0, : n * rank].reshape((n, rank), order=q_order)
-            gplus = slot[1, : p * n].reshape((p, n), order=g_order)
-            self._cache[poses.tobytes()] = (q, gplus)
+            if vt is None:  # an empty basis (no rows or no columns): made here
+                self._cache[poses.tobytes()] = make_basis(self.rows(poses)[0], False)
+                self.projected_residual(poses)
+                continue
+            # views of the shared memory in the layout make_basis gives (column-major Q): a
+            # BLAS product's order of sums, so its last bits, follow it
+            q, kept, u = (
+                None if sh is None else slot[k, : int(np.prod(sh[0]))].reshape(sh[0], order=sh[1])
+                for k, sh in zip((0, 1, 3), shapes, strict=True)
+            )
+            self._cache[poses.tobytes()] = Basis(q, u, vt, inv, scale, kept)
             self._cache[("rp", poses.tobytes())] = (self.residual_rows(poses), slot[2, :n])
 
 
@@ -159,7 +161,7 @@ def fit(
     prob: Problem, xs: list[np.ndarray], poses: np.ndarray, lower: np.ndarray | None = None
 ) -> Fit:
     """Least squares of r by G beta + X theta on ``poses``; ``lower`` bounds theta below."""
-    q, gplus = prob.basis(poses)
+    q, gplus = prob.basis(poses), prob.pinv(poses)
     rt, rp = prob.projected_residual(poses)
     k = sum(x.shape[2] for x in xs)
     if k == 0:

@@ -10,10 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calib.diagnosis.basis import RCOND, _orth
 from calib.diagnosis.bounded_search import minimise_together
 from calib.diagnosis.candidate import NO_SHAPE, Candidate, PoseRows
 from calib.diagnosis.context import Context
-from calib.diagnosis.problem import RCOND, Problem, _flat, _orth, _solve, _sse, fold_labels
+from calib.diagnosis.problem import Problem, _flat, _solve, _sse, fold_labels
 
 N_FINALISTS = 3
 INNER_FOLDS = 4
@@ -118,7 +119,7 @@ class Projection:
 def projection(prob: Problem, fixed: list[np.ndarray], poses: np.ndarray) -> Projection:
     """What :func:`rss_over_grid` needs of the poses and ``fixed``, whatever the shape: one
     computation serves the grid scan and every refinement of one candidate's shape."""
-    q0, _ = prob.basis(poses)
+    q0 = prob.basis(poses)
     rt, rp = prob.projected_residual(poses)
     if fixed:
         xf = _flat(fixed, poses).reshape(len(rt), -1)
@@ -354,7 +355,7 @@ def _inner_cv(
     finalist (the fold's basis, residual and fixed columns) taken once per fold."""
     scores = [0.0] * len(xs)
     for train, test in inner_folds(ctx, poses):
-        q, gplus = prob.basis(train)
+        q, gplus = prob.basis(train), prob.pinv(train)
         rt, rp = prob.projected_residual(train)
         r_test, geo_test = prob.r[test], prob.geo[test]
         fixed_train = [x[train] for x in fixed]

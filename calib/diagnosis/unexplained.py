@@ -121,7 +121,7 @@ def _training_subset(n: int) -> np.ndarray:
 def kernel_correction(prob: Problem, x: np.ndarray, train: np.ndarray, keep: np.ndarray):
     """Geometry refit on ``train`` and a kernel smoother of its residual over ``x``:
     returns a function (poses mask) -> corrected residual (n, R)."""
-    _, gplus = prob.basis(train)
+    gplus = prob.pinv(train)
     _, rt = prob.rows(train)
     beta = gplus @ rt
     e_tr = (prob.r[train] - prob.geo[train] @ beta) * keep[train]
