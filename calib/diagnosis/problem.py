@@ -114,22 +114,25 @@ class Problem:
         p = self.geo.shape[2]
         sizes = [int(poses.sum()) * self.r.shape[1] for poses in todo]
         keeps = [self._keeps_pinv(n) for n in sizes]  # decided here, in the sets' order
-        # per set: room for Q, G+, the projected residual and U (only when Q lacks some of
-        # its columns); pages never written take no memory
-        slots = [shared_array((4, n * p)) for n in sizes]
+        # per set: room for Q (at most p columns), G+ when it is kept, the projected residual
+        slots = [
+            (shared_array((n * p,)), shared_array((n * p if keep else 0,)), shared_array((n,)))
+            for n, keep in zip(sizes, keeps, strict=True)
+        ]
 
         def one(i: int) -> tuple:
             g, rt = self.rows(todo[i])
             b = make_basis(g, keeps[i])
             rp = rt - b.q @ (b.q.T @ rt)
-            for k, a in enumerate((b.q, b.kept_pinv, rp, b.u)):
+            for slot, a in zip(slots[i], (b.q, b.kept_pinv, rp), strict=True):
                 if a is not None:
-                    slots[i][k, : a.size] = a.ravel(order="K")  # in its own memory order
-            shapes = [None if a is None else (a.shape, _order(a)) for a in (b.q, b.kept_pinv, b.u)]
-            return shapes, b.vt, b.inv, b.scale
+                    slot[: a.size] = a.ravel(order="K")  # in its own memory order
+            shapes = [None if a is None else (a.shape, _order(a)) for a in (b.q, b.kept_pinv)]
+            # U itself only when Q lacks some of its columns (a rank-deficient geometry: rare)
+            return shapes, b.u, b.vt, b.inv, b.scale
 
-        for poses, n, slot, (shapes, vt, inv, scale) in zip(
-            todo, sizes, slots, map_in_order(one, len(todo), workers), strict=True
+        for poses, slot, (shapes, u, vt, inv, scale) in zip(
+            todo, slots, map_in_order(one, len(todo), workers), strict=True
         ):
             if vt is None:  # an empty basis (no rows or no columns): made here
                 self._cache[poses.tobytes()] = make_basis(self.rows(poses)[0], False)
@@ -137,12 +140,12 @@ class Problem:
                 continue
             # views of the shared memory in the layout make_basis gives (column-major Q): a
             # BLAS product's order of sums, so its last bits, follow it
-            q, kept, u = (
-                None if sh is None else slot[k, : int(np.prod(sh[0]))].reshape(sh[0], order=sh[1])
-                for k, sh in zip((0, 1, 3), shapes, strict=True)
+            q, kept = (
+                None if sh is None else a[: int(np.prod(sh[0]))].reshape(sh[0], order=sh[1])
+                for a, sh in zip(slot[:2], shapes, strict=True)
             )
             self._cache[poses.tobytes()] = Basis(q, u, vt, inv, scale, kept)
-            self._cache[("rp", poses.tobytes())] = (self.residual_rows(poses), slot[2, :n])
+            self._cache[("rp", poses.tobytes())] = (self.residual_rows(poses), slot[2])
 
 
 @dataclass(frozen=True)
