@@ -9,8 +9,11 @@ numbers are therefore those of the serial run, whatever the number of workers.
 
 Workers: ``PKM_DIAGNOSIS_WORKERS`` when set (1: in this process), else the machine's cores
 for a long run (at least ``PARALLEL_MIN_ROWS`` residual rows), else this process. Without
-``fork`` (not Linux/macOS) or inside a worker (a daemon process cannot have children) the
-tasks run here.
+``fork`` (not Linux/macOS) or inside a worker (no workers of workers) the tasks run here.
+
+A worker that ends without its result (killed by the system, most often for lack of memory
+on a large campaign) stops the map with :class:`WorkerLost`, which says so, instead of the
+parent waiting for it forever.
 
 A task whose result is large (a projection basis of thousands of rows) writes it into a
 :func:`shared_array` the parent made before the fork, instead of returning it through a pipe.
@@ -24,6 +27,8 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -34,6 +39,16 @@ PARALLEL_MIN_ROWS = 20_000
 PROGRESS_AFTER_S = 5.0  # a progress line only once the candidates have taken this long
 
 _TASK: Callable[[int], Any] | None = None  # what a forked worker runs (inherited)
+_IN_WORKER = False  # set in each worker: its tasks run in it, without workers of their own
+
+
+class WorkerLost(RuntimeError):
+    """A worker process ended without returning its task's result."""
+
+
+def _mark_worker() -> None:
+    global _IN_WORKER
+    _IN_WORKER = True
 
 
 def _run(i: int) -> Any:
@@ -53,6 +68,7 @@ def worker_count(n_rows: int, n_tasks: int) -> int:
         wanted = (os.cpu_count() or 1) if n_rows >= PARALLEL_MIN_ROWS else 1
     usable = (
         "fork" in multiprocessing.get_all_start_methods()
+        and not _IN_WORKER
         and not multiprocessing.current_process().daemon
     )
     return max(1, min(wanted, n_tasks)) if usable else 1
@@ -75,10 +91,18 @@ def map_in_order(fn: Callable[[int], Any], n_tasks: int, workers: int) -> Iterat
         return
     global _TASK
     _TASK = fn
+    context = multiprocessing.get_context("fork")
+    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_mark_worker)
     try:
-        with multiprocessing.get_context("fork").Pool(workers) as pool:
-            yield from pool.imap(_run, range(n_tasks), chunksize=1)
+        yield from pool.map(_run, range(n_tasks))
+    except BrokenProcessPool as exc:
+        raise WorkerLost(
+            f"a worker process ended abruptly while {n_tasks} tasks were evaluated on "
+            f"{workers} processes (killed by the system, most often for lack of memory): "
+            f"nothing was written; free memory, or set {ENV_WORKERS}=1 to run in one process"
+        ) from exc
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
         _TASK = None
 
 

@@ -6,11 +6,13 @@ forward selection also evaluates combinations; the worker count and the progress
 from __future__ import annotations
 
 import os
+import signal
 
 import numpy as np
 import pytest
 from diagnosis_support import synthetic_context
 
+from calib.cli.commands import main
 from calib.correction.kernel_ridge import cross_validate
 from calib.diagnosis import problem as problem_module
 from calib.diagnosis.candidates import library
@@ -18,7 +20,9 @@ from calib.diagnosis.context import Context
 from calib.diagnosis.problem import SCHEMES, Problem, fold_labels
 from calib.diagnosis.select import select_effects
 from calib.diagnosis.unexplained import kernel_heldout
+from calib.fit import EXIT_WORKER_LOST
 from common import worker_processes as parallel
+from tests.real_like_cases import arm_case
 
 N, T, A, P = 120, 3, 6, 12
 
@@ -184,3 +188,59 @@ def test_a_pseudo_inverse_made_again_is_the_kept_one(monkeypatch):
     assert made.basis(sets[0]).shape[1] == P - 1
     assert all(made._cache[s.tobytes()].kept_pinv is None for s in sets)
     assert all(kept._cache[s.tobytes()].kept_pinv is not None for s in sets)
+
+
+def _killed_at(i: int):
+    def task(j: int) -> int:
+        if j == i:
+            os.kill(os.getpid(), signal.SIGKILL)  # as the out-of-memory killer does
+        return j
+
+    return task
+
+
+def test_a_killed_worker_stops_the_map_with_the_cause():
+    """A worker the system kills (the out-of-memory killer on a large campaign) must not
+    leave the parent waiting for its result forever: WorkerLost, saying what happened and
+    what to do; the next map runs as usual."""
+    with pytest.raises(parallel.WorkerLost, match=r"lack of memory.*PKM_DIAGNOSIS_WORKERS=1"):
+        list(parallel.map_in_order(_killed_at(3), 6, 2))
+    assert list(parallel.map_in_order(lambda i: i + 1, 4, 2)) == [1, 2, 3, 4]
+
+
+def test_a_task_runs_its_own_maps_in_its_worker(monkeypatch):
+    """No workers of workers: inside a worker, worker_count is 1 and a map runs in place."""
+    monkeypatch.setenv(parallel.ENV_WORKERS, "2")
+
+    def task(i: int) -> tuple[int, int, list[int]]:
+        inner = parallel.worker_count(10**6, 4)
+        return i, inner, list(parallel.map_in_order(lambda j: os.getpid(), 2, inner))
+
+    got = list(parallel.map_in_order(task, 3, 2))
+    assert [i for i, _, _ in got] == [0, 1, 2]
+    assert all(inner == 1 for _, inner, _ in got)
+    assert all(len(set(pids)) == 1 and pids[0] != os.getpid() for _, _, pids in got)
+
+
+_REAL_RUN = parallel._run
+
+
+def _run_killing_the_second_candidate(i: int):
+    """common.worker_processes._run, but the worker of the second candidate is killed."""
+    task = parallel._TASK
+    if task is not None and task.__qualname__.startswith("select_effects.") and i == 1:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _REAL_RUN(i)
+
+
+def test_diagnose_whose_worker_is_killed_exits_6_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    case = arm_case(tmp_path)
+    monkeypatch.setenv(parallel.ENV_WORKERS, "2")
+    monkeypatch.setattr(parallel, "_run", _run_killing_the_second_candidate)
+    out = tmp_path / "d.json"
+    files = ["--model", str(case.model), "--errors", str(case.errors), "--data", str(case.data)]
+    code = main(["diagnose", *files, "--set", "calibration", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == EXIT_WORKER_LOST == 6
+    assert "error: a worker process ended abruptly" in err and "lack of memory" in err
+    assert not out.exists() and not list(tmp_path.glob("d.*"))

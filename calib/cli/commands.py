@@ -38,7 +38,8 @@ the data determine well, an implausible residual, or a residual above an explici
 beyond its residual, likely another tracker station, without ``--register``); verify,
 compensate and export of a result identify refused exit with identify's code (compensate and
 export write nothing unless ``--force``); 5 some
-desired poses out of reach (compensate); 130 interrupted.
+desired poses out of reach (compensate); 6 a worker process was killed before it finished
+(most often for lack of memory; nothing written); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ from calib.fit import (
     DETERMINED_Z,
     EXIT_BAD_INPUT,
     EXIT_OK,
+    EXIT_WORKER_LOST,
     CalibrationRun,
     model_from_files,
     probe_summary,
@@ -83,6 +85,7 @@ from calib.fit import (
 )
 from calib.loop import model_for_result, parameter_entry, with_result_content
 from common.atomic_files import json_text
+from common.worker_processes import WorkerLost
 from common.write_set import WriteSetError, write_files
 from twin.exceptions import TwinError
 
@@ -423,6 +426,9 @@ def main(argv: list[str] | None = None) -> int:
     except (DatasetError, CalibError, TwinError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except WorkerLost as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_WORKER_LOST
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)
         return 130

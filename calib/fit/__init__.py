@@ -43,6 +43,7 @@ __all__, __getattr__, __dir__ = face(
             "EXIT_OK",
             "EXIT_POOR_FIT",
             "EXIT_UNREACHABLE",
+            "EXIT_WORKER_LOST",
             "MAX_SIGMA_MM",
             "Verdict",
             "implausible_estimates",

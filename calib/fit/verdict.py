@@ -34,6 +34,7 @@ EXIT_BAD_INPUT = 2
 EXIT_NOT_CONVERGED = 3
 EXIT_POOR_FIT = 4
 EXIT_UNREACHABLE = 5
+EXIT_WORKER_LOST = 6  # a worker process was killed (most often for lack of memory)
 DEFAULT_MAX_RATIO: float | None = None  # no gate on the residual's size unless asked
 # an estimate beyond these is not a manufacturing or assembly error but a fit that went
 # astray (a length error of 5 cm on a machine built to tenths of a millimetre)
