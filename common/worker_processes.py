@@ -98,9 +98,8 @@ def map_in_order(fn: Callable[[int], Any], n_tasks: int, workers: int) -> Iterat
     except BrokenProcessPool as exc:
         raise WorkerLost(
             f"a worker process ended abruptly while {n_tasks} tasks were evaluated on "
-            f"{workers} processes (killed by the system, most often for lack of memory): "
-            "nothing was written; the memory a campaign needs is in the guide's 'What a "
-            "campaign costs'"
+            f"{workers} processes (killed by the system, most often for lack of memory; "
+            "the memory a campaign needs is in the guide's 'What a campaign costs')"
         ) from exc
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

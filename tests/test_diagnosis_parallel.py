@@ -205,7 +205,7 @@ def test_a_killed_worker_stops_the_map_with_the_cause():
     what to do; the next map runs as usual."""
     with pytest.raises(
         parallel.WorkerLost,
-        match=r"lack of memory\): nothing was written; the memory a campaign needs",
+        match=r"lack of memory; the memory a campaign needs is in the guide",
     ):
         list(parallel.map_in_order(_killed_at(3), 6, 2))
     assert list(parallel.map_in_order(lambda i: i + 1, 4, 2)) == [1, 2, 3, 4]
@@ -246,4 +246,5 @@ def test_diagnose_whose_worker_is_killed_exits_6_and_writes_nothing(tmp_path, mo
     err = capsys.readouterr().err
     assert code == EXIT_WORKER_LOST == 6
     assert "error: a worker process ended abruptly" in err and "lack of memory" in err
+    assert err.rstrip().endswith("'What a campaign costs'): nothing written")
     assert not out.exists() and not list(tmp_path.glob("d.*"))

@@ -427,7 +427,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except WorkerLost as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {exc}: nothing written", file=sys.stderr)
         return EXIT_WORKER_LOST
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)
