@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from diagnosis_support import synthetic_context
 
-from calib.diagnosis.basis import RCOND, _orth, orth_and_pinv
+from calib.diagnosis.basis import RCOND, _orth, column_scale, make_basis
 from calib.diagnosis.candidate import PoseRows
 from calib.diagnosis.candidates import library
 from calib.diagnosis.gravity import GravityLoads
@@ -68,14 +68,17 @@ def test_designs_of_a_grid_are_the_designs_of_each_shape(setup):
         np.testing.assert_allclose(many, each, rtol=1e-14, atol=1e-15 * np.max(np.abs(each)))
 
 
-def test_orth_and_pinv_from_one_svd_are_numpys(setup):
+def test_basis_and_pinv_from_one_svd_are_numpys(setup):
     _, prob = setup
     rng = np.random.default_rng(5)
     deficient = prob.geo[:40].reshape(-1, P) @ np.diag([1.0] * (P - 1) + [0.0])
     for a in (prob.geo[:40].reshape(-1, P), deficient, rng.normal(size=(30, 4)) * 1e-3):
-        q, gplus = orth_and_pinv(a)
-        np.testing.assert_array_equal(q, _orth(a))
-        np.testing.assert_array_equal(gplus, np.linalg.pinv(a, rcond=RCOND))
+        scale = column_scale(a)
+        b = make_basis(a, keep_pinv=True)
+        np.testing.assert_array_equal(b.q, _orth(a / scale))
+        np.testing.assert_array_equal(
+            b.pinv(), np.linalg.pinv(a / scale, rcond=RCOND) / scale[:, None]
+        )
 
 
 def test_factored_scan_of_actuator_offsets_matches_the_reference(setup):

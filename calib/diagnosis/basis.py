@@ -21,24 +21,17 @@ RCOND = 1e-10
 PINV_BUDGET = 1 << 30  # bytes of pseudo-inverses kept per problem
 
 
+def _kept(s: np.ndarray) -> np.ndarray:
+    """Which singular values (largest first) span the columns: above RCOND of the largest."""
+    return s > RCOND * max(s[0], 1e-300)
+
+
 def _orth(a: np.ndarray) -> np.ndarray:
     """Orthonormal basis of the column space of ``a`` (rank-revealing SVD)."""
     if a.shape[1] == 0:
         return np.zeros((a.shape[0], 0))
     u, s, _ = np.linalg.svd(a, full_matrices=False)
-    keep = s > RCOND * max(s[0], 1e-300)
-    return u[:, keep]
-
-
-def orth_and_pinv(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``_orth(a)`` and ``np.linalg.pinv(a, rcond=RCOND)`` from one SVD (numpy's pinv
-    arithmetic step for step, so the same numbers)."""
-    if a.size == 0:
-        return _orth(a), np.linalg.pinv(a, rcond=RCOND)
-    u, s, vt = np.linalg.svd(a, full_matrices=False)
-    q = u[:, s > RCOND * max(s[0], 1e-300)]
-    inv = _inverse(s)
-    return q, np.matmul(vt.T, np.multiply(inv[:, None], u.T))
+    return u[:, _kept(s)]
 
 
 def _inverse(s: np.ndarray) -> np.ndarray:
@@ -70,7 +63,7 @@ class Basis:
 
 def pinv_of(u: np.ndarray, vt: np.ndarray, inv: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """G+ from the SVD's U (or the same values in another memory order), V^T and inverted
-    singular values of the scaled columns, and the scale: orth_and_pinv's arithmetic, its
+    singular values of the scaled columns, and the scale: the arithmetic of numpy's pinv, its
     product's operand column-major as numpy's U^T gives it (a BLAS product's order of sums,
     so its last bits, follow the operands' layout)."""
     ut = np.multiply(inv[:, None], u.T, out=np.empty(u.T.shape, order="F"))
@@ -88,11 +81,11 @@ def make_basis(g: np.ndarray, keep_pinv: bool) -> Basis:
     scale = column_scale(g)
     a = g / scale
     if a.size == 0:
-        q, gplus = orth_and_pinv(a)
-        return Basis(q, None, None, None, scale, gplus / scale[:, None])
+        gplus = np.linalg.pinv(a, rcond=RCOND)
+        return Basis(_orth(a), None, None, None, scale, gplus / scale[:, None])
     u, s, vt = np.linalg.svd(a, full_matrices=False)
-    keep = s > RCOND * max(s[0], 1e-300)
-    q = u[:, keep]  # a column-major copy (numpy's U is row-major), as orth_and_pinv's
+    keep = _kept(s)
+    q = u[:, keep]  # a column-major copy (numpy's U is row-major), as _orth's
     inv = _inverse(s)
     full = None if keep.all() else u  # else Q's values are U's
     kept = pinv_of(u, vt, inv, scale) if keep_pinv else None
