@@ -177,36 +177,42 @@ def cross_validate(
         test = labels == f
         tr_idx = np.flatnonzero(~test)[training_subset(int(np.sum(~test)), CV_TRAINING_POSES)]
         zt = z[tr_idx]
-        distance[test] = np.sqrt(np.min(sq_dist(z[test], zt), axis=1))
         # -0.5 d2 of the training poses: every length scale's kernel is exp(this / (l^2 d))
         fold_data.append((test, zt, y[tr_idx], np.multiply(sq_dist(zt, zt), -0.5)))
     tasks = [(k, i) for k in range(len(fold_data)) for i in range(n_l)]
-    # -0.5 d2 of one fold's held-out poses to its training poses, kept by the process that
+    # d2 of one fold's held-out poses to its training poses, kept by the process that
     # evaluates its length scales (each worker its own: one fold's at a time in memory)
-    held_half: dict[int, np.ndarray] = {}
+    held_d2: dict[int, np.ndarray] = {}
 
-    def one(t: int) -> np.ndarray:
-        """Predictions (n_r, poses, R) of a fold's poses at one length scale."""
+    def one(t: int) -> tuple[np.ndarray | None, np.ndarray]:
+        """Predictions (n_r, poses, R) of a fold's poses at one length scale, and their
+        distance to the nearest training pose when this process first made their d2."""
         k, i = tasks[t]
         test, zt, yt, half_tt = fold_data[k]
-        if k not in held_half:
-            held_half.clear()
-            held_half[k] = np.multiply(sq_dist(z[test], zt), -0.5)
+        nearest = None
+        if k not in held_d2:
+            held_d2.clear()
+            held_d2[k] = sq_dist(z[test], zt)
+            nearest = np.sqrt(np.min(held_d2[k], axis=1))
         scale = length_scales[i] ** 2 * d
         w, u = np.linalg.eigh(np.exp(half_tt / scale))
         w = np.clip(w, 0.0, None)
         uy = u.T @ yt
-        kv = np.divide(held_half[k], scale)
+        kv = np.multiply(held_d2[k], -0.5)  # exp(-0.5 d2 / (l^2 d))
+        np.divide(kv, scale, out=kv)
         np.exp(kv, out=kv)
         kv = kv @ u
-        return np.array([kv @ (uy / (w + r)[:, None]) for r in ratios])
+        return nearest, np.array([kv @ (uy / (w + r)[:, None]) for r in ratios])
 
     # each (fold, length scale) its own eigendecomposition: side by side in worker processes
     # on a long run, the numbers of one process bit for bit (common.worker_processes)
     workers = worker_count(y.size, len(tasks))
-    for (k, i), held in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
-        pred[i][:, fold_data[k][0]] = held
-    held_half.clear()
+    for (k, i), (nearest, held) in zip(tasks, map_in_order(one, len(tasks), workers), strict=True):
+        test = fold_data[k][0]
+        pred[i][:, test] = held
+        if nearest is not None:  # the same numbers from whichever process made them
+            distance[test] = nearest
+    held_d2.clear()
     sse = np.sum((y[None, None] - pred) ** 2, axis=(2, 3))
     i, j = np.unravel_index(int(np.argmin(sse)), sse.shape)
     return CrossValidation(sse, length_scales[i], ratios[j], y, y - pred[i, j], distance)
