@@ -16,7 +16,9 @@ __all__, __getattr__, __dir__ = face(
         ),
         "worker_processes": (
             "Progress",
+            "WorkerLost",
             "map_in_order",
+            "shared_array",
             "worker_count",
         ),
         "write_set": (

@@ -129,7 +129,7 @@ def uncertainty(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evaluat
     everything = np.ones(n, bool)
     xs = [c.design(ctx, s) for c, s in zip(cands, ev.shapes, strict=True)]
     q = prob.basis(everything)
-    _, rt = prob.rows(everything)
+    rt = prob.residual_rows(everything)
     xt = _flat(xs, everything).reshape(len(rt), -1)
     xp = xt - q @ (q.T @ xt)
     rp = rt - q @ (q.T @ rt)
@@ -181,8 +181,7 @@ def undetermined(prob: Problem, ctx: Context, cands: list[Candidate], ev: Evalua
     everything = np.ones(ctx.n_poses, bool)
     xs = [c.design(ctx, s) for c, s in zip(cands, ev.shapes, strict=True)]
     q = prob.basis(everything)
-    _, rt = prob.rows(everything)
-    xt = _flat(xs, everything).reshape(len(rt), -1)
+    xt = _flat(xs, everything).reshape(q.shape[0], -1)
     norms = np.linalg.norm(xt, axis=0)
     out = np.zeros(len(norms), dtype=bool)
     live = np.flatnonzero(norms > 0)

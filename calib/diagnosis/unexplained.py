@@ -122,7 +122,7 @@ def kernel_correction(prob: Problem, x: np.ndarray, train: np.ndarray, keep: np.
     """Geometry refit on ``train`` and a kernel smoother of its residual over ``x``:
     returns a function (poses mask) -> corrected residual (n, R)."""
     gplus = prob.pinv(train)
-    _, rt = prob.rows(train)
+    rt = prob.residual_rows(train)
     beta = gplus @ rt
     e_tr = (prob.r[train] - prob.geo[train] @ beta) * keep[train]
     mu, sd = x[train].mean(axis=0), x[train].std(axis=0)
