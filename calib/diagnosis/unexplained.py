@@ -4,8 +4,9 @@ When no candidate lowers the held-out error, the residual is still tested for st
 Spearman rank correlation of each pose's residual size with tool position, tool orientation,
 each actuator and the measurement order; and a non-parametric correction (Nadaraya-Watson
 kernel smoothing of the residual vector over one group of pose variables, bandwidth by
-leave-one-out on the training poses) is tried on held-out poses. If it lowers the held-out
-error the answer is "unexplained: correlated with <group>", not a wrong effect and not "none".
+leave-one-out on the training poses that carry it) is tried on held-out poses. If it lowers the
+held-out error the answer is "unexplained: correlated with <group>", not a wrong effect and not
+"none".
 """
 
 from __future__ import annotations
@@ -53,8 +54,8 @@ def structure_detail(r: np.ndarray, keep: np.ndarray, ctx: Context) -> dict[str,
 
 # Nadaraya-Watson over at most this many training poses (evenly spaced through them): the
 # smoother's cost is (poses evaluated) x (training poses), so a campaign of N poses costs
-# N x 1,500 instead of N^2 (an 8,000-pose arm: 16 minutes and 9 GB before); every campaign up
-# to 1,500 poses uses all of them, as before
+# N x 1,500 instead of N^2 (an 8,000-pose arm: 16 minutes and 9 GB before), and its bandwidth
+# 1,500^2 (their leave-one-out); every campaign up to 1,500 poses uses all of them, as before
 MAX_TRAINING_POSES = 1500
 BLOCK = 512  # poses evaluated at once: memory BLOCK x training poses per array
 
@@ -130,13 +131,14 @@ def kernel_correction(prob: Problem, x: np.ndarray, train: np.ndarray, keep: np.
     z = (x - mu) / sd
     zt = z[train] / np.sqrt(z.shape[1])
     sub = _training_subset(len(zt))
-    z_sub, e_sub = zt[sub], e_tr[sub]
-    self_index = np.full(len(zt), -1)
-    self_index[sub] = np.arange(len(sub))
-    best, best_h = np.sum(e_tr**2), None
-    smoothed = _smooth_all(z_sub, e_sub, zt, BANDWIDTHS, self_index)
+    z_sub, e_sub, keep_sub = zt[sub], e_tr[sub], keep[train][sub]
+    # the bandwidth: leave-one-out over the poses that carry the smoother (each left out of
+    # its own smoothing), against no correction; on a long campaign that is MAX_TRAINING_POSES
+    # of them, its cost fixed, not another (training poses x MAX_TRAINING_POSES x bandwidths)
+    best, best_h = np.sum(e_sub**2), None
+    smoothed = _smooth_all(z_sub, e_sub, z_sub, BANDWIDTHS, np.arange(len(sub)))
     for h, fitted in zip(BANDWIDTHS, smoothed, strict=True):
-        loo = e_tr - fitted * keep[train]
+        loo = e_sub - fitted * keep_sub
         sse = float(np.sum(loo**2))
         if sse < best:
             best, best_h = sse, h
