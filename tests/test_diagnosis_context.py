@@ -1,0 +1,48 @@
+"""The diagnosis's sensitivities of a long campaign (all poses at once, the batched adjoint)
+equal those of a short one (each pose's Jacobian on its own) on every kind of machine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import calib.diagnosis.context as context
+from calib.fit.model import CalibrationModel
+from twin.formats.parameter_file import load_parameter_set
+from twin.mechanism import Mechanism
+from twin.workspace import random_poses
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("name", ["arm6r_3targets", "hexapod_rrrprr", "polisher"])
+def test_batched_sensitivities_equal_per_pose(name, monkeypatch):
+    nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
+    params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
+    model = CalibrationModel(nominal, params)
+    rng = np.random.default_rng(3)
+    values = rng.uniform(-1e-3, 1e-3, len(params))
+    if nominal.is_serial:
+        lo, hi = nominal.actuator_range.T
+        commands = rng.uniform(0.7 * lo, 0.7 * hi, (15, nominal.n_actuators))
+    else:
+        commands = random_poses(nominal, 15, rng)[1]
+    qpos = model.predict(values, commands).qpos
+    batched = context.target_jacobian_batch
+    calls = []
+    monkeypatch.setattr(context, "target_jacobian_batch", lambda *a: calls.append(1) or batched(*a))
+    j_one, extra_one = context.sensitivities(model, values, qpos)
+    monkeypatch.setattr(context, "PER_POSE_MAX", 10)  # 15 poses: a long campaign
+    j_all, extra_all = context.sensitivities(model, values, qpos)
+    assert len(calls) == 1  # the second, long, campaign only
+    assert j_all.shape == j_one.shape == (15, 3 * nominal.n_targets, nominal.n_actuators)
+    scale = np.abs(j_one).max()
+    assert scale > 0.1  # not a vacuous comparison
+    np.testing.assert_allclose(j_all, j_one, rtol=0, atol=1e-12 * scale)
+    assert extra_all.groups == extra_one.groups
+    assert any(c.size for c in extra_one.columns.values())
+    for g, cols in extra_one.columns.items():
+        assert extra_all.columns[g].shape == cols.shape
+        np.testing.assert_allclose(extra_all.columns[g], cols, rtol=0, atol=1e-12 * scale)
