@@ -46,3 +46,38 @@ def test_batched_sensitivities_equal_per_pose(name, monkeypatch):
     for g, cols in extra_one.columns.items():
         assert extra_all.columns[g].shape == cols.shape
         np.testing.assert_allclose(extra_all.columns[g], cols, rtol=0, atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize("name", ["arm6r_3targets", "hexapod_rrrprr"])
+def test_gravity_loads_in_two_processes_are_those_of_one(name, monkeypatch):
+    """The loads of a long run's poses, computed in chunks by worker processes, are those of
+    one process bit for bit (each pose's arithmetic is the same wherever it runs)."""
+    import calib.diagnosis.gravity as gravity
+    from common import worker_processes
+
+    nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
+    rng = np.random.default_rng(5)
+    if nominal.is_serial:
+        lo, hi = nominal.actuator_range.T
+        commands = rng.uniform(0.7 * lo, 0.7 * hi, (9, nominal.n_actuators))
+    else:
+        commands = random_poses(nominal, 9, rng)[1]
+    params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
+    qpos = CalibrationModel(nominal, params).predict(np.zeros(len(params)), commands).qpos
+    used = []
+
+    def spied(fn, n_tasks, workers):
+        used.append(workers)
+        return worker_processes.map_in_order(fn, n_tasks, workers)
+
+    monkeypatch.setattr(gravity, "map_in_order", spied)
+    loads = {}
+    for workers in ("1", "2"):
+        monkeypatch.setenv(worker_processes.ENV_WORKERS, workers)
+        loads[workers] = gravity.gravity_loads(nominal, qpos)
+    assert used == [1, 2]
+    one, two = loads["1"], loads["2"]
+    assert np.abs(one.own).max() > 0 and np.abs(one.unit_payload).max() > 0
+    np.testing.assert_array_equal(one.own, two.own)
+    np.testing.assert_array_equal(one.unit_payload, two.unit_payload)
+    assert one.moving_mass_kg == two.moving_mass_kg

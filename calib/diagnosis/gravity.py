@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from common.worker_processes import map_in_order, worker_count
 from twin.kinematics.closure import closure_jacobian, update_kinematics
 from twin.mechanism import Mechanism
 
@@ -47,23 +48,35 @@ def gravity_loads(mech: Mechanism, qpos: np.ndarray, payload_only: bool = False)
     m, d = loaded.model, loaded.data
     act, free = loaded.actuator_dofs, loaded.free_dofs()
     n_a = len(act)
-    own = np.empty((len(qpos), n_a))
-    unit = np.empty((len(qpos), n_a))
-    jacp = np.zeros((3, m.nv))
-    bias = np.zeros(m.nv)
-    for k, q in enumerate(qpos):
-        update_kinematics(loaded, q)
-        d.qvel[:] = 0.0
-        mujoco.mj_rne(m, d, 0, bias)
-        mujoco.mj_jacSite(m, d, jacp, None, loaded.tool_site)
-        payload = jacp.T @ (-g)  # what the joints must supply to hold 1 kg at the tool
-        t = np.zeros((m.nv, n_a))
-        t[act, np.arange(n_a)] = 1.0
-        if free.size:
-            c = closure_jacobian(loaded)
-            t[free] = -np.linalg.lstsq(c[:, free], c[:, act], rcond=None)[0]
-        own[k] = t.T @ bias
-        unit[k] = t.T @ payload
+
+    def loads_of(poses: np.ndarray) -> np.ndarray:
+        """(own, unit) of each of these poses, (len, 2, A)."""
+        out = np.empty((len(poses), 2, n_a))
+        jacp = np.zeros((3, m.nv))
+        bias = np.zeros(m.nv)
+        for k, q in enumerate(qpos[poses]):
+            update_kinematics(loaded, q)
+            d.qvel[:] = 0.0
+            mujoco.mj_rne(m, d, 0, bias)
+            mujoco.mj_jacSite(m, d, jacp, None, loaded.tool_site)
+            payload = jacp.T @ (-g)  # what the joints must supply to hold 1 kg at the tool
+            t = np.zeros((m.nv, n_a))
+            t[act, np.arange(n_a)] = 1.0
+            if free.size:
+                c = closure_jacobian(loaded)
+                t[free] = -np.linalg.lstsq(c[:, free], c[:, act], rcond=None)[0]
+            out[k, 0] = t.T @ bias
+            out[k, 1] = t.T @ payload
+        return out
+
+    # the poses in chunks, side by side in worker processes on a long run (each pose's loads
+    # those of one process, bit for bit: common.worker_processes)
+    workers = worker_count(3 * len(loaded.target_names) * len(qpos), len(qpos))
+    chunks = np.array_split(np.arange(len(qpos)), max(1, min(len(qpos), 4 * workers)))
+    both = np.concatenate(
+        [np.empty((0, 2, n_a)), *map_in_order(lambda i: loads_of(chunks[i]), len(chunks), workers)]
+    )
+    own, unit = both[:, 0], both[:, 1]
     if payload_only:
         return GravityLoads(np.zeros_like(own), unit, 0.0, payload_only=True)
     return GravityLoads(own, unit, float(np.sum(m.body_mass[1:])))
