@@ -2,10 +2,10 @@
 
 A task is a function of what the parent process holds (for the diagnosis: a candidate's
 nested cross-validation, a kernel correction of one fold, a cross-validation fold of the
-residual correction, the Jacobians of a chunk of poses); a worker (a fork of this process: it
-reads what the parent computed, without copying it) evaluates whole tasks, one at a time,
-with the parent's BLAS threads, and the results come back in the tasks' order. A task's
-numbers are therefore those of the serial run, whatever the number of workers.
+residual correction, the Jacobians or gravity loads of a chunk of poses); a worker (a fork of
+this process: it reads what the parent computed, without copying it) evaluates whole tasks,
+one at a time, with the parent's BLAS threads, and the results come back in the tasks' order.
+A task's numbers are therefore those of the serial run, whatever the number of workers.
 
 Workers: ``PKM_DIAGNOSIS_WORKERS`` when set (1: in this process), else the machine's cores
 for a long run (at least ``PARALLEL_MIN_ROWS`` residual rows), else this process. Without
