@@ -17,6 +17,7 @@ __all__, __getattr__, __dir__ = face(
         "worker_processes": (
             "Progress",
             "WorkerLost",
+            "map_chunks",
             "map_in_order",
             "shared_array",
             "worker_count",

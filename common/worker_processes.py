@@ -106,6 +106,15 @@ def map_in_order(fn: Callable[[int], Any], n_tasks: int, workers: int) -> Iterat
         _TASK = None
 
 
+def map_chunks(fn: Callable[[np.ndarray], Any], n_items: int, n_rows: int) -> Iterator[Any]:
+    """``fn(indices)`` for consecutive chunks of ``range(n_items)`` (at least one, empty for no
+    items), in order: side by side in worker processes on a long run (``n_rows`` residual
+    rows, :func:`worker_count`), four chunks per worker so that none waits long for the last."""
+    workers = worker_count(n_rows, n_items)
+    chunks = np.array_split(np.arange(n_items), max(1, min(n_items, 4 * workers)))
+    return map_in_order(lambda k: fn(chunks[k]), len(chunks), workers)
+
+
 class Progress:
     """``diagnosis: 3 of 12 candidates evaluated (gain_error) after 7 s`` on stderr, once
     the work has taken PROGRESS_AFTER_S: nothing on a short run."""

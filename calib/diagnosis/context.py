@@ -22,7 +22,7 @@ import numpy as np
 
 from calib.diagnosis.gravity import GravityLoads, gravity_loads
 from calib.fit.model import CalibrationModel
-from common.worker_processes import map_in_order, worker_count
+from common.worker_processes import map_chunks
 from twin.kinematics.closure import update_kinematics
 from twin.kinematics.sensitivity import target_jacobian
 from twin.kinematics.sensitivity_batch import target_jacobian_batch
@@ -168,15 +168,11 @@ def sensitivities(
     else:
         # the poses in chunks, side by side in worker processes on a long run (each pose's
         # Jacobian is that of one process, bit for bit: common.worker_processes)
+        def chunk(poses: np.ndarray) -> list[np.ndarray]:
+            return [target_jacobian(mech, pset, zero, qpos[i]) for i in poses]
+
         rows = 3 * len(model.nominal.target_names) * len(qpos)
-        workers = worker_count(rows, len(qpos))
-        chunks = np.array_split(np.arange(len(qpos)), max(1, min(len(qpos), 4 * workers)))
-
-        def chunk(k: int) -> list[np.ndarray]:
-            return [target_jacobian(mech, pset, zero, qpos[i]) for i in chunks[k]]
-
-        per_pose = [j for part in map_in_order(chunk, len(chunks), workers) for j in part]
-        jac = np.array(per_pose)  # (N, R, n)
+        jac = np.array([j for part in map_chunks(chunk, len(qpos), rows) for j in part])
     a = len(offsets)
     j_act = jac[:, :, :a]
     if not with_extra:

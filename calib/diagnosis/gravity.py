@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from common.worker_processes import map_in_order, worker_count
+from common.worker_processes import map_chunks
 from twin.kinematics.closure import closure_jacobian, update_kinematics
 from twin.mechanism import Mechanism
 
@@ -71,11 +71,8 @@ def gravity_loads(mech: Mechanism, qpos: np.ndarray, payload_only: bool = False)
 
     # the poses in chunks, side by side in worker processes on a long run (each pose's loads
     # those of one process, bit for bit: common.worker_processes)
-    workers = worker_count(3 * len(loaded.target_names) * len(qpos), len(qpos))
-    chunks = np.array_split(np.arange(len(qpos)), max(1, min(len(qpos), 4 * workers)))
-    both = np.concatenate(
-        [np.empty((0, 2, n_a)), *map_in_order(lambda i: loads_of(chunks[i]), len(chunks), workers)]
-    )
+    rows = 3 * len(loaded.target_names) * len(qpos)
+    both = np.concatenate(list(map_chunks(loads_of, len(qpos), rows)))
     own, unit = both[:, 0], both[:, 1]
     if payload_only:
         return GravityLoads(np.zeros_like(own), unit, 0.0, payload_only=True)
