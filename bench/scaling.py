@@ -28,19 +28,13 @@ from scenarios.twin_datasets import measured_dataset
 from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
 from twin.tracker import Tracker, TrackerNoise
-from twin.workspace import random_poses, uniform_commands
+from twin.workspace import random_commands
 
 READINGS = (1_000, 10_000, 100_000)
 MACHINES = {  # name: (MJCF, error model)
     "arm": ("models/arm6r.xml", "models/arm6r.params.toml"),
     "hexapod": ("models/hexapod_rrrprr.xml", "models/hexapod_rrrprr.params.toml"),
 }
-
-
-def _commands(nominal: Mechanism, n: int, rng: np.random.Generator) -> np.ndarray:
-    if nominal.is_serial:  # a serial arm: joint commands over 80 % of each range
-        return uniform_commands(nominal, n, 0.8, rng)
-    return random_poses(nominal, n, rng)[1]
 
 
 def campaign(machine: str, n_readings: int, folder: Path, seed: int = 0) -> Path:
@@ -52,7 +46,7 @@ def campaign(machine: str, n_readings: int, folder: Path, seed: int = 0) -> Path
     spec = TruthSpec("uniform", 0.3, 0.03, 0.0, 0.05)
     truth = nominal.with_model(params.inject(nominal.model, draw_truth(params, spec, rng)))
     n_poses = max(n_readings // len(nominal.target_names), 10)
-    cmds = _commands(nominal, n_poses, rng)
+    cmds = random_commands(nominal, n_poses, 0.8, rng)  # an arm: 80 % of each range
     tracker = Tracker(noise=TrackerNoise("gaussian", 1e-5, 0.0))
     ds = measured_dataset(truth, cmds, np.zeros((n_poses, 6)), "calibration", tracker, rng)
     n_cal = round(0.9 * n_poses)

@@ -12,7 +12,7 @@ import calib.diagnosis.context as context
 from calib.fit.model import CalibrationModel
 from twin.formats.parameter_file import load_parameter_set
 from twin.mechanism import Mechanism
-from twin.workspace import random_poses
+from twin.workspace import random_commands
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -24,11 +24,7 @@ def test_batched_sensitivities_equal_per_pose(name, monkeypatch):
     model = CalibrationModel(nominal, params)
     rng = np.random.default_rng(3)
     values = rng.uniform(-1e-3, 1e-3, len(params))
-    if nominal.is_serial:
-        lo, hi = nominal.actuator_range.T
-        commands = rng.uniform(0.7 * lo, 0.7 * hi, (15, nominal.n_actuators))
-    else:
-        commands = random_poses(nominal, 15, rng)[1]
+    commands = random_commands(nominal, 15, 0.7, rng)
     qpos = model.predict(values, commands).qpos
     batched = context.target_jacobian_batch
     calls = []
@@ -57,20 +53,17 @@ def test_gravity_loads_in_two_processes_are_those_of_one(name, monkeypatch):
 
     nominal = Mechanism.from_xml(ROOT / f"models/{name}.xml")
     rng = np.random.default_rng(5)
-    if nominal.is_serial:
-        lo, hi = nominal.actuator_range.T
-        commands = rng.uniform(0.7 * lo, 0.7 * hi, (9, nominal.n_actuators))
-    else:
-        commands = random_poses(nominal, 9, rng)[1]
+    commands = random_commands(nominal, 9, 0.7, rng)
     params = load_parameter_set(ROOT / f"models/{name}.params.toml", nominal.model)
     qpos = CalibrationModel(nominal, params).predict(np.zeros(len(params)), commands).qpos
     used = []
+    mapped = worker_processes.map_in_order
 
     def spied(fn, n_tasks, workers):
         used.append(workers)
-        return worker_processes.map_in_order(fn, n_tasks, workers)
+        return mapped(fn, n_tasks, workers)
 
-    monkeypatch.setattr(gravity, "map_in_order", spied)
+    monkeypatch.setattr(worker_processes, "map_in_order", spied)
     loads = {}
     for workers in ("1", "2"):
         monkeypatch.setenv(worker_processes.ENV_WORKERS, workers)

@@ -164,6 +164,17 @@ def uniform_commands(
     return rng.uniform(mid - half, mid + half, (n, mech.n_actuators))
 
 
+def random_commands(
+    mech: Mechanism, n: int, fraction: float, rng: np.random.Generator
+) -> np.ndarray:
+    """``n`` commands (N, A) of any machine: a serial arm's uniform over ``fraction`` of each
+    range (:func:`uniform_commands`), a closed chain's those of random reachable poses
+    (:func:`random_poses`; ``fraction`` does not apply)."""
+    if mech.is_serial:
+        return uniform_commands(mech, n, fraction, rng)
+    return random_poses(mech, n, rng)[1]
+
+
 def random_poses(
     mech: Mechanism, n: int, rng: np.random.Generator, max_draws: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
