@@ -110,8 +110,13 @@ class KernelRidge:
         return y - self.weights / inv_diag[:, None]
 
     def _chol(self):
-        c = self.kernel(self.z_train) + self.ratio * np.eye(len(self.z_train))
-        return cho_factor(c, lower=True)
+        return ridge_factor(self.kernel(self.z_train), self.ratio)
+
+
+def ridge_factor(c: np.ndarray, ratio: float):
+    """The Cholesky factor of the kernel ``c`` plus ``ratio`` I: what the weights and the
+    variances solve with, in the fit and in each cross-validation fold alike."""
+    return cho_factor(c + ratio * np.eye(len(c)), lower=True)
 
 
 def fit_kernel_ridge(
@@ -126,8 +131,7 @@ def fit_kernel_ridge(
     sub = training_subset(len(x))
     z = (x[sub] - mean) / scale
     d = z.shape[1]
-    c = np.exp(-0.5 * sq_dist(z, z) / (length_scale**2 * d)) + ratio * np.eye(len(z))
-    chol = cho_factor(c, lower=True)
+    chol = ridge_factor(np.exp(-0.5 * sq_dist(z, z) / (length_scale**2 * d)), ratio)
     w = cho_solve(chol, y[sub])
     s2 = float(np.sum(y[sub] * w)) / max(w.size, 1)
     return KernelRidge(z, w, float(length_scale), float(ratio), s2, mean, scale)
@@ -205,8 +209,7 @@ def cross_validate(
         c = np.exp(half_tt / scale)
         out = np.empty((n_r, len(kv), yt.shape[1]))
         for j, r in enumerate(ratios):  # the fit's own arithmetic: (C + r I)^-1 Y by Cholesky
-            chol = cho_factor(c + r * np.eye(len(c)), lower=True)
-            np.matmul(kv, cho_solve(chol, yt), out=out[j])
+            np.matmul(kv, cho_solve(ridge_factor(c, r), yt), out=out[j])
         return nearest, out
 
     # each (fold, length scale) its own factors: side by side in worker processes on a long
